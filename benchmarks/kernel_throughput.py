@@ -1,0 +1,60 @@
+"""Proposed moves per second of the annealing kernel on one core (issue 2 benchmark).
+
+For the heart at N = 500, 1000, 2000, 6000 with every cost term of the paper on (volume,
+power, supply, exclusion; pressure has weight 0 as in the paper), the kernel runs blocks
+of moves at three temperatures of the paper's schedule (start, middle, end) from a state
+that has been annealed to that point, and prints one JSON line per N:
+
+    n_terminals, moves_per_second (the mean over the schedule phases), per-phase rates,
+    the paper's step budget for N and its extrapolated wall time on one core.
+
+Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--moves 400000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from vasc_pipeline import config, engine, kernel
+
+
+def measure(n_terminals: int, moves: int, warmup: int) -> dict:
+    cfg = config.compose(["tissue=heart", f"n_terminals={n_terminals}"])
+    problem = engine.build_problem(cfg)
+    total = problem.total_steps  # the paper's budget: 1e9 (N/1000)^2
+    state = engine.initial_state(problem, seed=0)
+    engine.run_block(problem, state, 1000)  # compile outside the timing
+    rates = {}
+    # Phases of the schedule: the kernel is placed at a fraction of the paper's budget by
+    # setting its step counter (the temperature follows the step), then warmed up there.
+    for phase, frac in (("start", 0.0), ("middle", 0.5), ("end", 1.0)):
+        state.counters[kernel.COUNTER_STEP] = int(frac * total)
+        engine.run_block(problem, state, warmup)
+        t = time.perf_counter()
+        engine.run_block(problem, state, moves)
+        rates[phase] = moves / (time.perf_counter() - t)
+    mean_rate = sum(rates.values()) / len(rates)
+    return {
+        "n_terminals": n_terminals,
+        "moves_per_second": round(mean_rate),
+        "moves_per_second_by_phase": {k: round(v) for k, v in rates.items()},
+        "paper_steps": total,
+        "paper_schedule_hours_extrapolated": round(total / mean_rate / 3600, 2),
+        "grid_voxels": int(problem.tissue.mask.size),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[500, 1000, 2000, 6000])
+    parser.add_argument("--moves", type=int, default=400_000)
+    parser.add_argument("--warmup", type=int, default=2_000_000)
+    args = parser.parse_args()
+    for n in args.sizes:
+        print(json.dumps(measure(n, args.moves, args.warmup)), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""The kernel's geometric primitives against their plain NumPy twins and by hand."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vasc_pipeline import costs, engine, kernel, tissue
+from vasc_pipeline.rng import seed_state
+
+from helpers import make_problem
+
+
+@pytest.fixture(scope="module")
+def sphere_problem():
+    return make_problem("tissue=sphere", "n_terminals=100", "anneal.steps=1000")
+
+
+def random_points(problem, n, seed, spread=1.2):
+    rs = np.random.default_rng(seed)
+    r = problem.tissue.inlets[0][2]
+    return rs.uniform(-spread * r, spread * r, (n, 3))
+
+
+def test_voxel_pieces_sum_to_segment_length_and_match_fine_sampling():
+    rs = np.random.default_rng(0)
+    shape = (30, 30, 30)
+    for _ in range(50):
+        u0, u1 = rs.uniform(2, 27, 3), rs.uniform(2, 27, 3)
+        idx, pieces = costs.voxel_pieces(u0, u1, shape)
+        length = np.linalg.norm(u1 - u0)
+        assert pieces.sum() == pytest.approx(length, rel=1e-12)
+        # Fine sampling: the fraction of sample points in each voxel.
+        t = (np.arange(200_000) + 0.5) / 200_000
+        vox = np.floor(u0 + t[:, None] * (u1 - u0) + 0.5).astype(int)[:, ::-1]
+        keys, counts = np.unique(vox, axis=0, return_counts=True)
+        sampled = {tuple(k): c / t.size * length for k, c in zip(keys, counts)}
+        exact = {}
+        for k, p in zip(map(tuple, idx), pieces):
+            exact[k] = exact.get(k, 0.0) + p
+        for k, p in exact.items():
+            assert sampled.get(k, 0.0) == pytest.approx(p, abs=2e-4 * length + 1e-9)
+
+
+def test_voxel_pieces_axis_aligned_by_hand():
+    idx, pieces = costs.voxel_pieces(np.array([0.0, 1.0, 1.0]), np.array([3.0, 1.0, 1.0]), (3, 3, 5))
+    assert idx.tolist() == [[1, 1, 0], [1, 1, 1], [1, 1, 2], [1, 1, 3]]
+    np.testing.assert_allclose(pieces, [0.5, 1.0, 1.0, 0.5], rtol=1e-12)
+
+
+def test_kernel_traversal_equals_numpy_twin(sphere_problem):
+    model, t = sphere_problem.model, sphere_problem.tissue
+    pts = random_points(sphere_problem, 400, 1)
+    for p0, p1 in zip(pts[::2], pts[1::2]):
+        expected = costs.exclusion_sum(p0, p1, t)
+        got = kernel.segment_exclusion(model, p0, p1)
+        assert got == pytest.approx(expected, rel=1e-12, abs=1e-300)
+    # Axis-parallel and degenerate segments exercise the d == 0 branches.
+    c = t.origin + 0.5 * t.voxel_size * np.array(t.shape[::-1])
+    for d in (np.array([0.01, 0, 0]), np.array([0, 0.01, 0]), np.array([0, 0, 0.01]), np.zeros(3)):
+        assert kernel.segment_exclusion(model, c - d, c + d) == pytest.approx(costs.exclusion_sum(c - d, c + d, t),
+                                                                             rel=1e-12, abs=1e-300)
+
+
+def test_segment_outside_tissue_costs_nothing(sphere_problem):
+    model, t = sphere_problem.model, sphere_problem.tissue
+    lo, hi = t.bounds
+    # Along an edge of the grid box: inside the grid, outside the tissue ball.
+    p0 = lo + 1e-4
+    p1 = np.array([hi[0] - 1e-4, lo[1] + 1e-4, lo[2] + 1e-4])
+    assert kernel.segment_exclusion(model, p0, p1) == 0.0
+    assert costs.exclusion_sum(p0, p1, t) == 0.0
+    # Entirely outside the grid.
+    assert kernel.segment_exclusion(model, hi + 1.0, hi + 2.0) == 0.0
+    # Through the centre it costs something, and the exclusion grows with depth.
+    assert kernel.segment_exclusion(model, np.array([-0.01, 0, 0]), np.array([0.01, 0, 0])) > 0
+
+
+def test_supply_spheres_match_brute_force_voxel_for_voxel(sphere_problem):
+    problem = sphere_problem
+    state = engine.initial_state(problem, seed=5)
+    k, n = problem.physics.n_inlets, problem.physics.n_terminals
+    terminals = state.position[k:k + n]
+    expected = costs.supply_counts(terminals, problem.tissue, problem.physics.supply_radius)
+    got = np.where(state.supply < 0, 0, state.supply)
+    np.testing.assert_array_equal(got, expected)
+    assert np.all((state.supply < 0) == (problem.tissue.mask == 0))
+    assert state.costs[kernel.SUPPLY] == costs.supply_cost(expected, problem.tissue.mask)
+
+
+def test_supply_sphere_on_voxel_boundaries_and_centres():
+    """Centres placed exactly on voxel centres and faces: ties at the radius decide identically."""
+    problem = make_problem("tissue=box", "n_terminals=50", "anneal.steps=10", "tissue.voxel_size=0.001")
+    t, model = problem.tissue, problem.model
+    supply = np.where(t.mask == 1, 0, -1).astype(np.int32)
+    centre = t.origin + t.voxel_size * np.array([20, 20, 10])
+    for offset in ([0, 0, 0], [0.5, 0, 0], [0.5, 0.5, 0.5], [0.25, 0.5, 0]):
+        p = centre + t.voxel_size * np.array(offset)
+        supply[...] = np.where(t.mask == 1, 0, -1)
+        kernel.supply_sphere(model, supply, p, 1)
+        expected = costs.supply_counts(p[None], t, problem.physics.supply_radius)
+        np.testing.assert_array_equal(np.where(supply < 0, 0, supply), expected)
+        moved = p + t.voxel_size * np.array([0.5, 0.0, -0.5])
+        delta = kernel.supply_move_delta(model, supply, p, moved)
+        before = costs.supply_cost(np.where(supply < 0, 0, supply), t.mask)
+        kernel.supply_move(model, supply, p, moved)
+        after = np.where(supply < 0, 0, supply)
+        np.testing.assert_array_equal(after, costs.supply_counts(moved[None], t, problem.physics.supply_radius))
+        assert delta == costs.supply_cost(after, t.mask) - before
+
+
+def test_kernel_pressures_match_numpy():
+    problem = make_problem("tissue=box", "n_terminals=40", "anneal.steps=10", "physics.A_p=1e-6")
+    state = engine.initial_state(problem, seed=2)
+    tree = engine.tree_of(problem, state)
+    p_ref = costs.node_pressures(tree, problem.physics)
+    kernel.pressure_cost(problem.model, state)
+    np.testing.assert_allclose(state.scratch_pressure[1:], p_ref[1:], rtol=1e-12)
+    k, n = 1, 40
+    c_p = np.sum((p_ref[k:k + n] - problem.physics.pressure_terminal) ** 2)
+    assert state.costs[kernel.PRESSURE] == pytest.approx(c_p, rel=1e-12)
+    # Terminals see lower pressure than the inlet, deeper ones lower still.
+    assert np.all(p_ref[k:k + n] < problem.physics.pressure_inlet)

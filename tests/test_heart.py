@@ -1,0 +1,155 @@
+"""The coronary substrate (vasc_pipeline.heart): mass, shape, inlets, bad input."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from vasc_pipeline import heart
+from vasc_pipeline.tissue import TissueError, build_tissue
+
+TARGET_G = 218.0
+DENSITY = 1.06e3
+
+
+@pytest.fixture(scope="module")
+def dims():
+    return heart.heart_dimensions(n_terminals=300)
+
+
+@pytest.fixture(scope="module")
+def tissue1000():
+    return heart.heart_tissue(1000)
+
+
+def _mass_g(t, density=DENSITY):
+    return t.n_tissue_voxels * t.voxel_size**3 * density * 1e3
+
+
+def _voxel_centres_z(t):
+    return t.origin[2] + t.voxel_size * np.arange(t.shape[0])
+
+
+def test_reference_volume_matches_mass(dims):
+    assert dims["volume"] == pytest.approx(TARGET_G * 1e-3 / DENSITY, rel=1e-12)
+    assert dims["mass_g_reference"] == pytest.approx(TARGET_G, rel=1e-12)
+    # the fine-grid reference integral is converged
+    v = heart._reference_volume()
+    assert heart._reference_volume.__wrapped__(1200) == pytest.approx(v, rel=1e-4)
+
+
+def test_mass_within_2_percent_at_1000(tissue1000):
+    assert _mass_g(tissue1000) == pytest.approx(TARGET_G, rel=0.02)
+
+
+def test_mass_within_2_percent_at_500():
+    assert _mass_g(heart.heart_tissue(500)) == pytest.approx(TARGET_G, rel=0.02)
+
+
+def test_mass_and_density_params_scale_the_heart():
+    t = heart.heart_tissue(1000, mass_g=109.0, density=1.0e3)
+    assert _mass_g(t, 1.0e3) == pytest.approx(109.0, rel=0.02)
+
+
+def test_dimensions_physiological(dims):
+    assert 0.07 < dims["lv_long_axis"] < 0.12
+    assert 0.007 < dims["lv_wall_equator"] < 0.016
+    assert 0.002 < dims["rv_free_wall"] < 0.007
+    assert dims["rv_offset"] > 0
+    assert dims["apex_z"] < dims["base_z"] == 0.0
+    assert dims["mass_g_voxelised"] == pytest.approx(TARGET_G, rel=0.03)
+
+
+def test_via_build_tissue_ignores_other_keys(caplog):
+    with caplog.at_level(logging.INFO, logger="vasc_pipeline.heart"):
+        t = build_tissue("heart", 300, mass_g=218.0, density=1.06e3, voxel_size=None, radius=0.02,
+                         side=0.1, q_required=None)
+    assert t.name == "heart" and t.ndim == 3
+    assert any("g myocardium" in r.getMessage() for r in caplog.records)
+
+
+def test_inlets_outside_tissue_inside_grid(tissue1000):
+    t = tissue1000
+    assert t.inlet_names == ("LCA", "RCA")
+    assert t.inlets.shape == (2, 3)
+    assert not t.contains(t.inlets).any()
+    lo, hi = t.bounds
+    assert np.all(t.inlets > lo) and np.all(t.inlets < hi)
+    # LCA on the left (-x), RCA on the right (+x, the RV side), both at the base
+    assert t.inlets[0, 0] < t.inlets[1, 0]
+    assert np.all(t.inlets[:, 2] >= 0.0)
+    # room outside the tissue: a margin of empty voxels on every side of the heart
+    m = t.mask
+    for axis in range(3):
+        occupied = np.flatnonzero(m.any(axis=tuple(a for a in range(3) if a != axis)))
+        assert occupied[0] >= 5 and occupied[-1] <= m.shape[axis] - 6
+
+
+def test_lv_cavity_not_tissue(tissue1000, dims):
+    t = tissue1000
+    centre = np.array([0.0, 0.0, dims["lv_center_z"]])
+    assert not t.contains(centre[None])[0]
+    # the LV wall is tissue on both sides of the cavity (lateral wall and septum)
+    r = 0.5 * (dims["lv_outer_radius"] + dims["lv_inner_radius"])
+    assert t.contains(np.array([[-r, 0.0, centre[2]], [r, 0.0, centre[2]], [0.0, r, centre[2]]])).all()
+
+
+def test_rv_cavity_not_tissue(tissue1000, dims):
+    t = tissue1000
+    z = dims["rv_center_z"]
+    x_septum = dims["lv_outer_radius"]  # LV outer surface at the equator (rv_center_z = lv_center_z)
+    x_rv_inner = dims["rv_center_x"] + dims["rv_inner_semi_axes"][0]
+    x_rv_outer = dims["rv_center_x"] + dims["rv_outer_semi_axes"][0]
+    cavity = np.array([[0.5 * (x_septum + x_rv_inner), 0.0, z]])
+    free_wall = np.array([[0.5 * (x_rv_inner + x_rv_outer), 0.0, z]])
+    assert x_septum < x_rv_inner
+    assert not t.contains(cavity)[0]
+    assert t.contains(free_wall)[0]
+    assert not t.contains(np.array([[x_rv_outer + 2 * t.voxel_size, 0.0, z]]))[0]
+
+
+def test_tissue_connected(tissue1000):
+    _, n = ndimage.label(tissue1000.mask)
+    assert n == 1
+
+
+def test_apex_below_base_and_truncation(tissue1000, dims):
+    t = tissue1000
+    zc = _voxel_centres_z(t)
+    layers = np.flatnonzero(t.mask.any(axis=(1, 2)))
+    z_low, z_high = zc[layers[0]], zc[layers[-1]]
+    assert z_low < z_high
+    assert z_low == pytest.approx(dims["apex_z"], abs=t.voxel_size)
+    # truncated at the base plane z = 0: no tissue above it, but tissue right below it
+    assert z_high <= 1e-12
+    assert z_high > -t.voxel_size
+    assert zc[-1] > 0.0 and not t.mask[zc > 1e-12].any()
+    # the base cross-section is open: the LV cavity reaches the base plane
+    assert t.mask[layers[-1]].sum() > 0
+    assert not t.contains(np.array([[0.0, 0.0, z_high]]))[0]
+
+
+def test_distance_transform_deep_enough(tissue1000):
+    assert tissue1000.distance.max() > 2.0
+
+
+def test_explicit_voxel_size():
+    t = heart.heart_tissue(1000, voxel_size=2e-3)
+    assert t.voxel_size == 2e-3
+    assert _mass_g(t) == pytest.approx(TARGET_G, rel=0.05)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("mass_g", 0.0), ("mass_g", -5.0), ("mass_g", float("nan")), ("mass_g", "heavy"),
+    ("density", 0.0), ("density", -1.0), ("density", float("inf")),
+    ("voxel_size", -1e-3), ("voxel_size", 0.0),
+])
+def test_bad_parameters_name_the_field(field, value):
+    with pytest.raises(TissueError, match=field):
+        heart.heart_tissue(100, **{field: value})
+    if field != "voxel_size":
+        with pytest.raises(TissueError, match=field):
+            heart.heart_dimensions(**{field: value})

@@ -1,0 +1,177 @@
+"""The annealing kernel: incremental costs equal full recomputation, legality, determinism."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vasc_pipeline import costs, engine, kernel
+from vasc_pipeline.tree import check_tree, count_terminals
+
+from helpers import make_problem
+
+COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
+
+
+def assert_running_equals_full(problem, state):
+    tree = engine.tree_of(problem, state)
+    check_tree(tree, problem.tissue)
+    running = engine.running_costs(problem, state)
+    full = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
+    assert running["supply"] == full["supply"]  # integer-valued: exact
+    for term in ("volume", "power", "exclusion", "pressure", "total"):
+        assert running[term] == pytest.approx(full[term], rel=1e-9, abs=1e-300), term
+    return running
+
+
+def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True):
+    c = state.counters
+    pairs = [(kernel.COUNTER_BIFURCATION_PROPOSED, kernel.COUNTER_BIFURCATION_ACCEPTED),
+             (kernel.COUNTER_SWAP_PROPOSED, kernel.COUNTER_SWAP_ACCEPTED)]
+    if terminals_move:
+        pairs.append((kernel.COUNTER_TERMINAL_PROPOSED, kernel.COUNTER_TERMINAL_ACCEPTED))
+    for proposed, accepted in pairs:
+        assert 0 < c[accepted] < c[proposed]
+
+
+@pytest.mark.parametrize("overrides", [
+    ("tissue=plane2d",),
+    ("tissue=sphere", "n_terminals=120"),
+    ("tissue=box", "n_terminals=120"),
+    ("tissue=heart", "n_terminals=120"),  # two inlets: subtrees move between LCA and RCA trees
+], ids=["plane2d", "sphere", "box", "heart"])
+def test_running_sums_equal_full_recomputation_after_a_million_moves(overrides):
+    steps = 1_000_000
+    problem = make_problem(*overrides, *COLD, f"anneal.steps={steps}")
+    state = engine.initial_state(problem, seed=11)
+    assert_running_equals_full(problem, state)
+    inlet_split_before = state.n_downstream[:problem.physics.n_inlets].copy()
+    engine.run_block(problem, state, steps)
+    assert state.counters[kernel.COUNTER_STEP] == steps
+    assert_moves_of_every_kind_accepted_and_rejected(state)
+    assert_running_equals_full(problem, state)
+    if problem.physics.n_inlets == 2:
+        assert not np.array_equal(state.n_downstream[:2], inlet_split_before)
+
+
+def test_pressure_term_incremental_when_enabled():
+    problem = make_problem("tissue=box", "n_terminals=30", "physics.A_p=1e-9", *COLD, "anneal.steps=200000")
+    assert problem.terms.pressure
+    state = engine.initial_state(problem, seed=3)
+    engine.run_block(problem, state, 200_000)
+    assert_moves_of_every_kind_accepted_and_rejected(state)
+    running = assert_running_equals_full(problem, state)
+    assert running["pressure"] > 0
+
+
+def test_fixed_terminals_never_move_and_supply_is_off(tmp_path):
+    base = make_problem("tissue=sphere", "n_terminals=25", "anneal.steps=10")
+    sites = engine.initial_state(base, seed=4).position[1:26]
+    path = tmp_path / "sites.csv"
+    np.savetxt(path, sites, delimiter=",", header="x,y,z", comments="")
+    problem = make_problem("tissue=sphere", "n_terminals=25", f"terminals.path={path}", "terminals.fixed=true",
+                           *COLD, "anneal.steps=300000")
+    assert not problem.terms.supply
+    state = engine.initial_state(problem, seed=4)
+    np.testing.assert_array_equal(state.position[1:26], sites)
+    engine.run_block(problem, state, 300_000)
+    np.testing.assert_array_equal(state.position[1:26], sites)
+    assert state.counters[kernel.COUNTER_TERMINAL_PROPOSED] == 0
+    assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=False)
+    running = assert_running_equals_full(problem, state)
+    assert running["supply"] == 0.0
+
+
+def test_same_config_and_seed_give_identical_trees_and_block_splits_are_bit_identical():
+    overrides = ("tissue=sphere", "n_terminals=60", *COLD, "anneal.steps=300000")
+    problem = make_problem(*overrides)
+    one = engine.initial_state(problem, seed=9)
+    engine.run_block(problem, one, 300_000)
+
+    split = engine.initial_state(make_problem(*overrides), seed=9)
+    for n in (1, 99_999, 150_000, 50_000):
+        engine.run_block(problem, split, n)
+        split = engine.restore_state(problem, engine.state_arrays(split))  # checkpoint round trip
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+
+    other = engine.initial_state(problem, seed=10)
+    engine.run_block(problem, other, 300_000)
+    assert not np.array_equal(one.position, other.position)
+
+
+# --- swap legality -------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_problem():
+    # Huge temperature: every legal proposal is accepted, so legality alone decides.
+    return make_problem("tissue=box", "n_terminals=12", "anneal.T_start=1e300", "anneal.T_end=1e299",
+                        "anneal.steps=10")
+
+
+def ancestors(parent, node):
+    out = []
+    node = parent[node]
+    while node >= 0:
+        out.append(node)
+        node = parent[node]
+    return out
+
+
+def reference_swap(parent, a, b):
+    """Plain-Python swap on a parent array; None where the swap is illegal."""
+    if a == b or parent[a] == parent[b] or b in ancestors(parent, a) or a in ancestors(parent, b):
+        return None
+    out = parent.copy()
+    out[a], out[b] = parent[b], parent[a]
+    return out
+
+
+def test_swap_rejects_ancestors_and_siblings(small_problem):
+    problem = small_problem
+    state = engine.initial_state(problem, seed=1)
+    parent = state.parent
+    k = problem.physics.n_inlets
+    node = k  # a terminal: every node on its path up is its ancestor
+    up = ancestors(parent, node)
+    before = engine.state_arrays(state)
+    for anc in up[:-1]:  # the last ancestor is the inlet, which never moves
+        assert kernel.swap_nodes(problem.model, state, node, anc, 1e300) == kernel.ILLEGAL
+        assert kernel.swap_nodes(problem.model, state, anc, node, 1e300) == kernel.ILLEGAL
+    bif = up[0]
+    c0, c1 = state.children[bif]
+    assert kernel.swap_nodes(problem.model, state, c0, c1, 1e300) == kernel.ILLEGAL
+    for name in ("parent", "children", "n_downstream", "costs"):
+        np.testing.assert_array_equal(getattr(state, name), before[name])
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), pairs=st.lists(st.tuples(st.integers(1, 23), st.integers(1, 23)),
+                                                       min_size=1, max_size=60))
+def test_random_swap_sequences_match_a_plain_reference(small_problem, seed, pairs):
+    problem = small_problem
+    state = engine.initial_state(problem, seed=seed % 1000)
+    for a, b in pairs:
+        expected = reference_swap(state.parent, a, b) if a != b else None
+        if a == b:
+            continue
+        outcome = kernel.swap_nodes(problem.model, state, a, b, 1e300)
+        if expected is None:
+            assert outcome == kernel.ILLEGAL
+        else:
+            assert outcome == kernel.ACCEPTED
+            np.testing.assert_array_equal(state.parent, expected)
+        assert np.array_equal(state.n_downstream, count_terminals(state.parent, 12, 1))
+    assert_running_equals_full(problem, state)
+
+
+def test_translation_keeps_terminals_in_tissue_and_bifurcations_in_the_grid(small_problem):
+    problem = small_problem
+    state = engine.initial_state(problem, seed=2)
+    lo, hi = problem.tissue.bounds
+    terminal, bifurcation = 1, 1 + 12
+    outside_tissue = np.array([lo[0] + 1e-4, lo[1] + 1e-4, lo[2] + 1e-4])  # in the grid margin
+    assert kernel.translate_node(problem.model, state, terminal, outside_tissue, 1e300) == kernel.ILLEGAL
+    assert kernel.translate_node(problem.model, state, bifurcation, outside_tissue, 1e300) == kernel.ACCEPTED
+    assert kernel.translate_node(problem.model, state, bifurcation, hi + 1e-3, 1e300) == kernel.ILLEGAL
+    assert_running_equals_full(problem, state)

@@ -1,0 +1,153 @@
+"""Sweep configs composed with hydra.compose, grid expansion and run ids (no Dask, no runs)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from vasc_pipeline import config, orchestrate, store, sweep
+from vasc_pipeline.config import ConfigError
+
+SWEEPS = sorted(p.stem for p in (config.CONFIG_DIR / "sweep").glob("*.yaml"))
+
+
+def test_every_documented_sweep_exists():
+    assert {"smoke", "mb_scan", "size_scan", "convergence"} <= set(SWEEPS)
+
+
+@pytest.mark.parametrize("name", SWEEPS)
+def test_every_sweep_composes_and_expands_to_distinct_valid_jobs(name, tmp_path):
+    cfg = config.compose([f"+sweep={name}", f"output_dir={tmp_path}"])
+    assert cfg.sweep.name == name
+    jobs = sweep.expand(cfg)
+    sw = cfg.sweep
+    n_steps = len(sw.steps) if sw.steps else 1
+    assert len(jobs) == len(sw.n_terminals) * len(sw.m_b) * len(sw.seeds) * n_steps
+    assert len({j.run_id for j in jobs}) == len(jobs)
+    for j in jobs:
+        assert j.store == str(tmp_path / "runs" / f"{j.run_id}.zarr")
+        assert j.run_id.startswith(j.cell) and j.run_id.startswith(cfg.tissue.name)
+        run = j.run_config()
+        assert run.sweep is None and run.n_terminals == j.coords["n_terminals"]
+        assert run.physics.m_b == j.coords["m_b"] and run.seed == j.coords["seed"]
+        config.validate(run)
+
+
+def test_smoke_is_several_small_jobs_with_explicit_steps():
+    cfg = config.compose(["+sweep=smoke"])
+    jobs = sweep.expand(cfg)
+    assert len(jobs) >= 4 and cfg.tissue.name in ("sphere", "plane2d")
+    assert all(j.coords["n_terminals"] <= 64 for j in jobs)
+    assert cfg.anneal.steps is not None and sum(config.scheduled_steps(j.run_config()) for j in jobs) <= 2e7
+
+
+def test_mb_scan_matches_the_paper():
+    cfg = config.compose(["+sweep=mb_scan"])
+    assert cfg.tissue.name == "heart" and cfg.sweep.n_terminals == [1000]
+    m_b = cfg.sweep.m_b
+    assert 641.3 in m_b and max(m_b) / 641.3 >= 10 - 1e-9 and 641.3 / min(m_b) >= 10 - 1e-9  # two decades
+    assert len(cfg.sweep.seeds) >= 4
+    # Steps: the schedule's default, the paper's 1e9 at N = 1000.
+    assert all(config.scheduled_steps(j.run_config()) == 1_000_000_000 for j in sweep.expand(cfg))
+
+
+def test_size_scan_steps_scale_with_n_squared():
+    cfg = config.compose(["+sweep=size_scan"])
+    assert cfg.sweep.n_terminals == [500, 1000, 2000, 4000, 6000] and cfg.tissue.name == "heart"
+    for j in sweep.expand(cfg):
+        n = j.coords["n_terminals"]
+        assert config.scheduled_steps(j.run_config()) == round(1e9 * (n / 1000) ** 2)
+    override = sweep.expand(config.compose(["+sweep=size_scan", "anneal.steps=5000"]))
+    assert {config.scheduled_steps(j.run_config()) for j in override} == {5000}
+
+
+def test_convergence_is_the_papers_2d_test_at_several_step_counts():
+    cfg = config.compose(["+sweep=convergence"])
+    assert cfg.tissue.name == "plane2d" and cfg.sweep.n_terminals == [64]
+    assert cfg.physics.gamma == 3.0 and cfg.physics.inlet_radius == 2.4e-3 and cfg.physics.A_o == 0.0
+    assert len(cfg.sweep.seeds) >= 8 and len(cfg.sweep.steps) >= 3
+    jobs = sweep.expand(cfg)
+    by_steps = {}
+    for j in jobs:
+        assert config.scheduled_steps(j.run_config()) == j.coords["steps"]
+        assert j.run_id.endswith(f"-S{j.coords['steps']}-s{j.coords['seed']}")
+        by_steps.setdefault(j.coords["steps"], []).append(j)
+    assert sorted(by_steps) == sorted(cfg.sweep.steps)
+    assert all(len(v) == len(cfg.sweep.seeds) for v in by_steps.values())
+
+
+def test_command_line_overrides_beat_the_sweep_file():
+    cfg = config.compose(["+sweep=smoke", "tissue=plane2d", "sweep.seeds=[5]", "output_dir=runs/demo",
+                          "cluster.n_workers=2"])
+    jobs = sweep.expand(cfg)
+    assert {j.coords["tissue"] for j in jobs} == {"plane2d"} and {j.coords["seed"] for j in jobs} == {5}
+    assert cfg.cluster.n_workers == 2 and cfg.output_dir == "runs/demo"
+    assert all(Path(j.config["output_dir"]).is_absolute() for j in jobs)
+
+
+def test_cluster_groups_compose():
+    assert config.compose([]).cluster.name == "local"
+    assert config.compose(["cluster=slurm"]).cluster.slurm.walltime
+    addr = config.compose(["cluster=address", "cluster.address=tcp://127.0.0.1:8786"]).cluster
+    assert addr.name == "address" and addr.address == "tcp://127.0.0.1:8786"
+    orchestrate.check_cluster(addr)
+    with pytest.raises(ConfigError, match="cluster.address is required for cluster=address"):
+        orchestrate.check_cluster(config.compose(["cluster=address"]).cluster)
+    with pytest.raises(ConfigError, match="cluster.n_workers must be an integer >= 1"):
+        orchestrate.check_cluster(config.compose(["cluster.n_workers=0"]).cluster)
+    with pytest.raises(ConfigError, match="cluster.tls needs both"):
+        orchestrate.check_cluster(config.compose(["cluster=slurm", "cluster.tls.cert=/x.pem"]).cluster)
+
+
+def test_run_ids_are_stable_and_made_of_grid_coordinates_only():
+    assert sweep.run_id("sphere", 16, 641.3, 0) == "sphere-N16-mb641.3-s0"
+    assert sweep.run_id("heart", 1000, 6413.0, 3) == "heart-N1000-mb6413-s3"
+    assert sweep.run_id("plane2d", 64, 641.3, 7, steps=10_000_000) == "plane2d-N64-mb641.3-S10000000-s7"
+    assert sweep.run_id("box", 8, 1e12, 1) == "box-N8-mb1e12-s1"
+    base = ["+sweep=smoke"]
+    ids = {j.run_id: j for j in sweep.expand(config.compose(base))}
+    # Changing the anneal keeps the ids (the store's config hash then refuses the change)...
+    changed = {j.run_id: j for j in sweep.expand(config.compose([*base, "anneal.T_end=1e-8"]))}
+    assert changed.keys() == ids.keys()
+    assert all(store.config_hash(changed[k].config) != store.config_hash(ids[k].config) for k in ids)
+    # ...adding grid points adds runs and leaves the existing ones as they are.
+    grown = {j.run_id: j for j in sweep.expand(config.compose([*base, "sweep.seeds=[0,1,2]"]))}
+    assert ids.keys() < grown.keys()
+    assert all(store.config_hash(grown[k].config) == store.config_hash(ids[k].config) for k in ids)
+    # Where results go and how often they are checkpointed is not part of a run's identity.
+    moved = sweep.expand(config.compose([*base, "output_dir=/elsewhere", "checkpoint.every_seconds=1"]))
+    assert all(store.config_hash(j.config) == store.config_hash(ids[j.run_id].config) for j in moved)
+
+
+def test_no_sweep_is_one_job_of_the_base_config():
+    cfg = config.compose(["n_terminals=40", "seed=7", "physics.m_b=100"])
+    (j,) = sweep.expand(cfg)
+    assert j.run_id == "heart-N40-mb100-s7" and j.coords["steps"] is None
+
+
+@pytest.mark.parametrize("override, field", [
+    ("sweep.n_terminals=[16,1]", r"sweep\.n_terminals\[1\] must be an integer >= 2"),
+    ("sweep.m_b=[0.0]", r"sweep\.m_b\[0\] must be a finite number > 0"),
+    ("sweep.m_b=[-641.3]", r"sweep\.m_b\[0\] must be a finite number > 0"),
+    ("sweep.seeds=[-1]", r"sweep\.seeds\[0\] must be an integer in \[0"),
+    ("sweep.steps=[0]", r"sweep\.steps\[0\] must be an integer >= 1"),
+    ("sweep.seeds=[1,1]", r"sweep\.seeds lists \[1\] more than once"),
+    ("sweep.m_b=[]", r"sweep\.m_b must be a non-empty list"),
+    ("anneal.steps=0", r"anneal\.steps must be an integer >= 1"),
+    ("physics.viscosity=0", r"physics\.viscosity must be a finite number > 0"),
+])
+def test_bad_grid_values_name_the_field(override, field):
+    with pytest.raises(ConfigError, match=field):  # compose checks the base config, expand the grid
+        sweep.expand(config.compose(["+sweep=smoke", override]))
+
+
+def test_job_config_paths_are_absolute(tmp_path):
+    mask = tmp_path / "m.npy"
+    cfg = config.compose(["tissue=mask", "tissue.path=m.npy", "tissue.voxel_size=0.001",
+                          "tissue.inlets=[[0.0,0.0,0.0]]", "output_dir=rel/out"])
+    (j,) = sweep.expand(cfg)
+    assert Path(j.config["tissue"]["path"]) == Path.cwd() / "m.npy" != mask
+    assert Path(j.config["output_dir"]) == Path.cwd() / "rel" / "out"
+    assert math.isclose(j.config["physics"]["m_b"], 641.3)

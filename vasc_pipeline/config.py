@@ -1,0 +1,249 @@
+"""Configuration schema, validation and composition.
+
+The dataclasses below are the single source of defaults and types (Hydra registers them
+as structured configs, so a wrong type or unknown key fails at once). :func:`validate`
+checks ranges and names the offending field before any job starts. :func:`compose`
+builds a resolved config from Hydra-style overrides for scripts and tests; it is the only
+function here that touches Hydra.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+__all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
+           "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
+           "compose", "CONFIG_DIR"]
+
+# An installed wheel carries conf/ inside the package; a source checkout has it at the top.
+_PACKAGE_DIR = Path(__file__).resolve().parent
+CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
+PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
+
+
+class ConfigError(ValueError):
+    """A configuration value out of its accepted range; the message names the field."""
+
+
+@dataclass
+class TissueConfig:
+    name: str = "heart"
+    voxel_size: Optional[float] = None   # m; None: R_supply / 4 (SPEC section 3)
+    q_required: Optional[float] = None   # s^-1; None: the N supply spheres fill the tissue
+    radius: float = 0.02                 # sphere radius, m
+    size: list[float] = field(default_factory=lambda: [0.04, 0.04, 0.02])  # box edges [x, y, z], m
+    side: float = 0.1                    # plane2d square side, m
+    mass_g: float = 218.0                # heart: myocardial mass, g
+    density: float = 1.06e3              # heart: myocardial density, kg m^-3
+    path: Optional[str] = None           # mask: .npy file or Zarr array
+    array: Optional[str] = None          # mask: array name inside a Zarr group
+    origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
+    inlets: Optional[list[list[float]]] = None  # mask: inlet positions, m
+
+
+@dataclass
+class PhysicsConfig:
+    gamma: float = 2.1                   # bifurcation exponent
+    inlet_radius: float = 2.1e-3         # combined inlet radius r_in, m
+    total_flow: float = 4.16e-6          # Q0, m^3 s^-1
+    m_b: float = 641.3                   # W m^-3
+    viscosity: float = 3.6e-3            # Pa s
+    r_cutoff: float = 1e-5               # m
+    A_wv: float = 1e4
+    A_o: float = 100.0
+    A_p: float = 0.0
+    A_s: float = 1e30
+    pressure_inlet: float = 13.3e3       # Pa (100 mmHg)
+    pressure_terminal: float = 12.0e3    # Pa
+
+
+@dataclass
+class AnnealConfig:
+    name: str = "paper"
+    T_start: float = 1e10
+    T_end: float = 1e-5
+    steps: Optional[int] = None          # proposed moves; None: steps_at_1000 * (N / 1000)^2
+    steps_at_1000: float = PAPER_STEPS_AT_1000
+    p_swap: float = 0.5                  # probability that a proposal is a swap
+    step_terminal: float = 0.5           # translation half-width for terminals, in R_supply
+    step_bifurcation: float = 1.0        # translation half-width for bifurcations, in R_supply
+    trace_every: int = 100_000           # steps between trace records
+
+
+@dataclass
+class TerminalsConfig:
+    path: Optional[str] = None           # CSV of x, y, z (m)
+    fixed: bool = False                  # fixed sites never move; the supply term is off
+
+
+@dataclass
+class CheckpointConfig:
+    every_seconds: float = 60.0
+
+
+@dataclass
+class RunConfig:
+    n_terminals: int = 200
+    seed: int = 0
+    output_dir: str = "results/default"
+    tissue: TissueConfig = field(default_factory=TissueConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    anneal: AnnealConfig = field(default_factory=AnnealConfig)
+    terminals: TerminalsConfig = field(default_factory=TerminalsConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    # The pipeline's groups (dataclasses at the end of this module): +sweep=NAME adds a
+    # sweep, so it is optional; cluster is always present (cluster=local by default).
+    sweep: Optional[SweepConfig] = None
+    cluster: ClusterConfig = field(default_factory=lambda: ClusterConfig())
+
+
+def to_run_config(cfg: Any) -> RunConfig:
+    """A :class:`RunConfig` from a RunConfig, a dict or an OmegaConf node (extra keys ignored)."""
+    if isinstance(cfg, RunConfig):
+        return cfg
+    from omegaconf import OmegaConf
+
+    container = OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else dict(cfg)
+    known = set(RunConfig.__dataclass_fields__)
+    schema = OmegaConf.structured(RunConfig)
+    try:
+        merged = OmegaConf.merge(schema, {k: v for k, v in container.items() if k in known})
+    except Exception as exc:  # omegaconf's message names the key and the type it wanted
+        raise ConfigError(f"invalid configuration: {exc}") from exc
+    return OmegaConf.to_object(merged)
+
+
+def _positive(name: str, value: float) -> None:
+    if value is None or not (value > 0 and math.isfinite(value)):
+        raise ConfigError(f"{name} must be a finite number > 0, got {value}")
+
+
+def scheduled_steps(cfg: RunConfig) -> int:
+    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default."""
+    if cfg.anneal.steps is not None:
+        return int(cfg.anneal.steps)
+    return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** 2)))
+
+
+def validate(cfg: RunConfig) -> RunConfig:
+    """Check every range the model needs; raise :class:`ConfigError` naming the field."""
+    from .tissue import TISSUES
+
+    if not isinstance(cfg.n_terminals, int) or cfg.n_terminals < 2:
+        raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
+    if cfg.tissue.name not in TISSUES:
+        raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    if cfg.tissue.name == "heart" and cfg.n_terminals < 2:
+        raise ConfigError("n_terminals must be >= 2 for the heart (two inlets)")
+    p = cfg.physics
+    for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
+        _positive(f"physics.{name}", getattr(p, name))
+    for name in ("r_cutoff", "A_o", "A_p", "A_s"):
+        value = getattr(p, name)
+        if not (value >= 0 and math.isfinite(value)):
+            raise ConfigError(f"physics.{name} must be a finite number >= 0, got {value}")
+    a = cfg.anneal
+    _positive("anneal.T_start", a.T_start)
+    _positive("anneal.T_end", a.T_end)
+    if a.T_end >= a.T_start:
+        raise ConfigError(f"anneal.T_end must be < anneal.T_start, got T_end={a.T_end} >= T_start={a.T_start}")
+    if a.steps is not None and (not isinstance(a.steps, int) or a.steps < 1):
+        raise ConfigError(f"anneal.steps must be an integer >= 1 (proposed moves per run), got {a.steps}")
+    _positive("anneal.steps_at_1000", a.steps_at_1000)
+    if not 0.0 <= a.p_swap <= 1.0:
+        raise ConfigError(f"anneal.p_swap must lie in [0, 1], got {a.p_swap}")
+    _positive("anneal.step_terminal", a.step_terminal)
+    _positive("anneal.step_bifurcation", a.step_bifurcation)
+    if not isinstance(a.trace_every, int) or a.trace_every < 1:
+        raise ConfigError(f"anneal.trace_every must be an integer >= 1, got {a.trace_every}")
+    if cfg.tissue.voxel_size is not None:
+        _positive("tissue.voxel_size", cfg.tissue.voxel_size)
+    if cfg.tissue.q_required is not None:
+        _positive("tissue.q_required", cfg.tissue.q_required)
+    _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)
+    if cfg.terminals.fixed and not cfg.terminals.path:
+        raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
+    return cfg
+
+
+def register_schema() -> None:
+    """Register :class:`RunConfig` as Hydra's ``base_config`` (types and keys are checked on merge)."""
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(name="base_config", node=RunConfig)
+
+
+def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config") -> RunConfig:
+    """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    register_schema()
+    if GlobalHydra.instance().is_initialized():
+        GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+    return validate(to_run_config(cfg))
+
+
+# --- Sweep and cluster (the pipeline: sweep.py expands, orchestrate.py fans out) -------------
+
+
+@dataclass
+class SweepConfig:
+    """A grid of runs; ``None`` on an axis means the single value of the base config.
+
+    Run ids come from the grid coordinates (tissue, N, m_b, seed, and steps when the
+    steps axis is given), so adding grid points to an output_dir adds runs.
+    """
+
+    name: str = "single"
+    n_terminals: Optional[list[int]] = None   # N axis; None: [n_terminals]
+    m_b: Optional[list[float]] = None         # W m^-3 axis; None: [physics.m_b]
+    seeds: Optional[list[int]] = None         # None: [seed]
+    steps: Optional[list[int]] = None         # proposed moves axis; None: anneal.steps (or the schedule's)
+
+
+@dataclass
+class TLSConfig:
+    """Dask TLS settings (distributed.security.Security) for cluster=address / cluster=slurm."""
+
+    ca_file: Optional[str] = None             # PEM file of the certificate authority
+    cert: Optional[str] = None                # PEM client/worker certificate
+    key: Optional[str] = None                 # PEM private key (None: inside cert)
+    require_encryption: bool = False          # refuse unencrypted connections
+
+
+@dataclass
+class SlurmConfig:
+    """dask-jobqueue SLURMCluster options: one single-threaded worker per SLURM task slot."""
+
+    queue: Optional[str] = None               # partition (-p)
+    account: Optional[str] = None             # -A
+    walltime: str = "04:00:00"                # per SLURM job; runs resume across jobs
+    cores: int = 1                            # worker processes (one thread each) per SLURM job
+    memory: str = "4GB"                       # per SLURM job
+    interface: Optional[str] = None           # network interface of the workers, e.g. ib0
+    local_directory: Optional[str] = None     # node-local scratch for Dask
+    log_directory: Optional[str] = None       # where SLURM writes the job logs
+    job_extra_directives: list[str] = field(default_factory=list)   # extra '#SBATCH ...' lines
+    job_script_prologue: list[str] = field(default_factory=list)    # e.g. module load / conda activate
+
+
+@dataclass
+class ClusterConfig:
+    """Where the jobs run: ``local`` (LocalCluster), ``address`` (existing scheduler) or ``slurm``."""
+
+    name: str = "local"
+    n_workers: Optional[int] = None           # local: None = cores (at most one per job); slurm: workers to request
+    address: Optional[str] = None             # tcp://host:8786 or tls://host:8786 of an existing scheduler
+    dashboard_address: Optional[str] = "127.0.0.1:8787"  # local/slurm dashboard; None: no dashboard
+    retries: int = 2                          # resubmissions of a job whose worker died or that raised
+    tls: TLSConfig = field(default_factory=TLSConfig)
+    slurm: SlurmConfig = field(default_factory=SlurmConfig)
+
+

@@ -1,0 +1,690 @@
+"""The annealing kernel: incremental costs of translate and swap moves (numba, nogil).
+
+The kernel sees only two named tuples of arrays and scalars (built by
+:mod:`vasc_pipeline.engine`):
+
+``Model`` (read-only): the cost tables, the voxel grids, weights, switches and schedule.
+``State`` (mutated in place): the tree arrays, per-segment caches (length, exclusion
+traversal sum), the supply count map, running cost sums with their Neumaier compensation,
+the generator state, counters and step sizes. Everything a resumed run needs is in
+``State``; the ``scratch_*`` arrays are not.
+
+:func:`anneal_block` runs a block of proposed moves from ``state`` and returns; the
+temperature and every random draw depend only on the step number and the saved state, so
+S steps in one block or any split of blocks give bit-identical trees.
+
+Cost term order in ``costs``: volume, power, supply, exclusion, pressure (unscaled).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from ._jit import jit, jit_inline
+from .rng import next_below, next_double
+
+Model = namedtuple("Model", [
+    "n_inlets", "n_terminals",
+    "tables",            # float64 (5, N + 1): volume, power, exclusion, resistance, flow factors by n
+    "mask",              # uint8 (nz, ny, nx)
+    "distance",          # float32 (nz, ny, nx), voxel units
+    "origin",            # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
+    "voxel_size",        # float, m
+    "box_lo", "box_hi",  # float64 (3,) grid box, m
+    "supply_rho",        # float, supply radius in voxel units
+    "w_exclusion", "w_pressure", "w_supply",  # scaled weights A_x / A_wv
+    "supply_on", "exclusion_on", "pressure_on", "move_terminals", "planar",
+    "pressure_inlet", "pressure_terminal",    # Pa
+    "T_start", "T_end", "total_steps",        # exponential schedule
+    "p_swap",            # probability that a proposal is a swap
+])
+
+State = namedtuple("State", [
+    "parent", "children", "position", "n_downstream",
+    "seg_length",        # float64 (2N,) m
+    "seg_exclusion",     # float64 (2N,) sum_v (D_v L_v)^6 of the segment's centre-line
+    "supply",            # int32 (nz, ny, nx) supply count per tissue voxel, -1 outside tissue
+    "costs", "compensation",  # float64 (5,) running sums and their Neumaier compensation
+    "rng",               # uint64 (4,)
+    "counters",          # int64 (8,) see COUNTER_*
+    "step_size",         # float64 (2,) translation half-width for terminals, bifurcations [m]
+    "scratch_mark", "scratch_stack", "scratch_pressure",
+])
+
+(COUNTER_STEP, COUNTER_TERMINAL_PROPOSED, COUNTER_TERMINAL_ACCEPTED, COUNTER_BIFURCATION_PROPOSED,
+ COUNTER_BIFURCATION_ACCEPTED, COUNTER_SWAP_PROPOSED, COUNTER_SWAP_ACCEPTED) = range(7)
+N_COUNTERS = 8
+
+VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = range(5)
+ILLEGAL, REJECTED, ACCEPTED = -1, 0, 1  # outcomes of a proposal
+T_VOLUME, T_POWER, T_EXCLUSION, T_RESISTANCE, T_FLOW = range(5)
+
+
+@jit_inline
+def _add(costs, compensation, k, x):
+    """Neumaier-compensated running sum: long runs drift by O(eps), not O(steps * eps)."""
+    s = costs[k]
+    t = s + x
+    if abs(s) >= abs(x):
+        compensation[k] += (s - t) + x
+    else:
+        compensation[k] += (x - t) + s
+    costs[k] = t
+
+
+@jit
+def temperature(model, step):
+    """Exponential schedule T_start -> T_end over total_steps; T_end afterwards."""
+    frac = min(step / model.total_steps, 1.0)
+    return model.T_start * math.exp(math.log(model.T_end / model.T_start) * frac)
+
+
+@jit_inline
+def _distance3(a, b):
+    dx = a[0] - b[0]
+    dy = a[1] - b[1]
+    dz = a[2] - b[2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@jit
+def segment_exclusion(model, p0, p1):
+    """sum_v (D_v L_v)^6 over voxels crossed by p0 -> p1 (exact Amanatides-Woo traversal).
+
+    Voxel coordinates put voxel centres at integers; the segment is clipped to the grid.
+    """
+    dist = model.distance
+    nz, ny, nx = dist.shape
+    h = model.voxel_size
+    ux = (p0[0] - model.origin[0]) / h
+    uy = (p0[1] - model.origin[1]) / h
+    uz = (p0[2] - model.origin[2]) / h
+    dx = (p1[0] - model.origin[0]) / h - ux
+    dy = (p1[1] - model.origin[1]) / h - uy
+    dz = (p1[2] - model.origin[2]) / h - uz
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if length == 0.0:
+        return 0.0
+    t0 = 0.0
+    t1 = 1.0
+    # Liang-Barsky clip against the grid box [-0.5, n - 0.5) on each axis.
+    for u, d, n in ((ux, dx, nx), (uy, dy, ny), (uz, dz, nz)):
+        if d == 0.0:
+            if u < -0.5 or u >= n - 0.5:
+                return 0.0
+        else:
+            ta = (-0.5 - u) / d
+            tb = (n - 0.5 - u) / d
+            if ta > tb:
+                ta, tb = tb, ta
+            t0 = max(t0, ta)
+            t1 = min(t1, tb)
+    if t0 >= t1:
+        return 0.0
+    ix = min(max(math.floor(ux + t0 * dx + 0.5), 0), nx - 1)
+    iy = min(max(math.floor(uy + t0 * dy + 0.5), 0), ny - 1)
+    iz = min(max(math.floor(uz + t0 * dz + 0.5), 0), nz - 1)
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    sz = 1 if dz > 0.0 else -1
+    # Parameter of the next plane crossing on each axis, computed from the plane itself
+    # (not accumulated) so that it equals the NumPy twin's value exactly.
+    tx = (ix + 0.5 * sx - ux) / dx if dx != 0.0 else np.inf
+    ty = (iy + 0.5 * sy - uy) / dy if dy != 0.0 else np.inf
+    tz = (iz + 0.5 * sz - uz) / dz if dz != 0.0 else np.inf
+    t = t0
+    acc = 0.0
+    while True:
+        tn = min(tx, ty, tz, t1)
+        depth = dist[iz, iy, ix]
+        if depth > 0.0 and tn > t:
+            x = depth * ((tn - t) * length)
+            x3 = x * x * x
+            acc += x3 * x3
+        if tn >= t1:
+            break
+        if tx <= ty and tx <= tz:
+            ix += sx
+            if ix < 0 or ix >= nx:
+                break
+            tx = (ix + 0.5 * sx - ux) / dx
+        elif ty <= tz:
+            iy += sy
+            if iy < 0 or iy >= ny:
+                break
+            ty = (iy + 0.5 * sy - uy) / dy
+        else:
+            iz += sz
+            if iz < 0 or iz >= nz:
+                break
+            tz = (iz + 0.5 * sz - uz) / dz
+        t = tn
+    return acc
+
+
+@jit_inline
+def _inside(i, u, d2, e2, rho2):
+    """The coverage test of voxel i, written exactly as the NumPy reference writes it."""
+    dx = i - u
+    return (dx * dx + d2) + e2 <= rho2
+
+
+_ROUNDING = 1e-9  # an interval end this close to a voxel centre is settled by the exact test
+
+
+@jit_inline
+def _row_interval(u, d2, e2, rho2, n):
+    """Voxels i of one grid row whose centre lies within a sphere, clipped to [0, n).
+
+    ``d2``, ``e2``: squared offsets of the row from the centre in the other two axes; ``u``
+    the centre's coordinate along the row. The square root gives the ends; where an end
+    falls within rounding of a voxel centre the exact test settles it, so the result
+    equals a voxel-by-voxel test. Returns (lo, hi), empty when lo > hi.
+    """
+    rem = (rho2 - e2) - d2
+    if rem < -_ROUNDING * rho2:
+        return 1, 0
+    r = math.sqrt(max(rem, 0.0))
+    x = u - r
+    lo = math.ceil(x)
+    if lo - x < _ROUNDING or x - (lo - 1) < _ROUNDING:
+        c = math.floor(u + 0.5)  # nearest voxel centre: inside if any is
+        if not _inside(c, u, d2, e2, rho2):
+            return 1, 0
+        lo = min(lo, c)
+        while _inside(lo - 1, u, d2, e2, rho2):
+            lo -= 1
+        while not _inside(lo, u, d2, e2, rho2):
+            lo += 1
+    x = u + r
+    hi = math.floor(x)
+    if x - hi < _ROUNDING or (hi + 1) - x < _ROUNDING:
+        c = math.floor(u + 0.5)
+        if not _inside(c, u, d2, e2, rho2):
+            return 1, 0
+        hi = max(hi, c)
+        while _inside(hi + 1, u, d2, e2, rho2):
+            hi += 1
+        while not _inside(hi, u, d2, e2, rho2):
+            hi -= 1
+    return max(lo, 0), min(hi, n - 1)
+
+
+@jit_inline
+def _voxel_coords(model, x, y, z):
+    h = model.voxel_size
+    return (x - model.origin[0]) / h, (y - model.origin[1]) / h, (z - model.origin[2]) / h
+
+
+@jit_inline
+def _row_change(row, lo, hi, other_lo, other_hi, sign, write):
+    """C_s change when voxels lo..hi of a row, except other_lo..other_hi, gain ``sign``."""
+    delta = 0
+    for i in range(lo, hi + 1):
+        if other_lo <= i <= other_hi:
+            continue
+        b = row[i]
+        if b < 0:  # not tissue
+            continue
+        if sign > 0:
+            delta += (2 * b - 1) - 9 * (b == 0)   # s(b + 1) - s(b), s(0) = 10, s(b) = (b - 1)^2
+        else:
+            delta += (3 - 2 * b) + 9 * (b == 1)   # s(b - 1) - s(b)
+        if write:
+            row[i] = b + sign
+    return delta
+
+
+@jit
+def _sphere_change(model, supply, old, new, write):
+    """Change of C_s when a supply sphere moves from ``old`` to ``new`` (either may be NaN: absent).
+
+    Only voxels in one sphere but not the other change; with ``write`` the counts are
+    updated. ``supply`` holds -1 outside tissue.
+    """
+    nz, ny, nx = supply.shape
+    rho = model.supply_rho
+    rho2 = rho * rho
+    has_old = not math.isnan(old[0])
+    has_new = not math.isnan(new[0])
+    ox, oy, oz = _voxel_coords(model, old[0], old[1], old[2]) if has_old else (np.nan, np.nan, np.nan)
+    nx_, ny_, nz_ = _voxel_coords(model, new[0], new[1], new[2]) if has_new else (np.nan, np.nan, np.nan)
+    z_lo = nz
+    z_hi = -1
+    if has_old:
+        z_lo = min(z_lo, math.floor(oz - rho))
+        z_hi = max(z_hi, math.ceil(oz + rho))
+    if has_new:
+        z_lo = min(z_lo, math.floor(nz_ - rho))
+        z_hi = max(z_hi, math.ceil(nz_ + rho))
+    delta = 0
+    for k in range(max(z_lo, 0), min(z_hi, nz - 1) + 1):
+        do2 = (k - oz) * (k - oz) if has_old else np.inf
+        dn2 = (k - nz_) * (k - nz_) if has_new else np.inf
+        if do2 > rho2 and dn2 > rho2:
+            continue
+        y_lo = ny
+        y_hi = -1
+        if do2 <= rho2:
+            ry = math.sqrt(rho2 - do2)
+            y_lo = min(y_lo, math.floor(oy - ry) - 1)
+            y_hi = max(y_hi, math.ceil(oy + ry) + 1)
+        if dn2 <= rho2:
+            ry = math.sqrt(rho2 - dn2)
+            y_lo = min(y_lo, math.floor(ny_ - ry) - 1)
+            y_hi = max(y_hi, math.ceil(ny_ + ry) + 1)
+        for j in range(max(y_lo, 0), min(y_hi, ny - 1) + 1):
+            o_lo, o_hi = 1, 0
+            n_lo, n_hi = 1, 0
+            if do2 <= rho2:
+                o_lo, o_hi = _row_interval(ox, (j - oy) * (j - oy), do2, rho2, nx)
+            if dn2 <= rho2:
+                n_lo, n_hi = _row_interval(nx_, (j - ny_) * (j - ny_), dn2, rho2, nx)
+            row = supply[k, j]
+            if o_lo <= o_hi:
+                delta += _row_change(row, o_lo, o_hi, n_lo, n_hi, -1, write)
+            if n_lo <= n_hi:
+                delta += _row_change(row, n_lo, n_hi, o_lo, o_hi, 1, write)
+    return float(delta)
+
+
+_NO_SPHERE = np.array([np.nan, np.nan, np.nan])
+
+
+@jit
+def supply_sphere(model, supply, p, sign):
+    """Add (sign = +1) or remove (-1) one supply sphere centred at p; return the change of C_s."""
+    if sign > 0:
+        return _sphere_change(model, supply, _NO_SPHERE, p, True)
+    return _sphere_change(model, supply, p, _NO_SPHERE, True)
+
+
+@jit
+def supply_move_delta(model, supply, old, new):
+    """Change of C_s if a sphere moved from ``old`` to ``new``; reads only voxels that change."""
+    return _sphere_change(model, supply, old, new, False)
+
+
+@jit
+def supply_move(model, supply, old, new):
+    """Move a sphere from ``old`` to ``new`` in the count map."""
+    _sphere_change(model, supply, old, new, True)
+
+
+@jit
+def pressure_cost(model, state):
+    """C_p from scratch: Poiseuille drops down every inlet's tree (O(N), depth-first)."""
+    tables = model.tables
+    parent = state.parent
+    children = state.children
+    n_down = state.n_downstream
+    pressure = state.scratch_pressure
+    stack = state.scratch_stack
+    top = 0
+    for k in range(model.n_inlets):
+        pressure[k] = model.pressure_inlet
+        stack[top] = children[k, 0]
+        top += 1
+    total = 0.0
+    first_bif = model.n_inlets + model.n_terminals
+    while top > 0:
+        top -= 1
+        x = stack[top]
+        n = n_down[x]
+        pressure[x] = pressure[parent[x]] - tables[T_FLOW, n] * tables[T_RESISTANCE, n] * state.seg_length[x]
+        if x >= first_bif:
+            stack[top] = children[x, 0]
+            stack[top + 1] = children[x, 1]
+            top += 2
+        elif x >= model.n_inlets:
+            d = pressure[x] - model.pressure_terminal
+            total += d * d
+    return total
+
+
+@jit
+def initialise(model, state):
+    """Fill the per-segment caches, the supply map and the running sums from the tree."""
+    tables = model.tables
+    pos = state.position
+    state.costs[:] = 0.0
+    state.compensation[:] = 0.0
+    state.seg_length[:] = 0.0
+    state.seg_exclusion[:] = 0.0
+    supply = state.supply
+    nz, ny, nx = supply.shape
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                supply[k, j, i] = 0 if model.mask[k, j, i] != 0 else -1
+    for i in range(model.n_inlets, state.parent.size):
+        p = state.parent[i]
+        n = state.n_downstream[i]
+        length = _distance3(pos[i], pos[p])
+        state.seg_length[i] = length
+        _add(state.costs, state.compensation, VOLUME, tables[T_VOLUME, n] * length)
+        _add(state.costs, state.compensation, POWER, tables[T_POWER, n] * length)
+        if model.exclusion_on:
+            s = segment_exclusion(model, pos[i], pos[p])
+            state.seg_exclusion[i] = s
+            _add(state.costs, state.compensation, EXCLUSION, tables[T_EXCLUSION, n] * s)
+    if model.supply_on:
+        c_s = 10.0 * np.count_nonzero(model.mask)
+        for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
+            c_s += supply_sphere(model, supply, pos[t], 1)
+        state.costs[SUPPLY] = c_s
+    if model.pressure_on:
+        state.costs[PRESSURE] = pressure_cost(model, state)
+
+
+@jit
+def _accept(d_cost, temp, rng):
+    if d_cost <= 0.0:
+        return True
+    return next_double(rng) < math.exp(-d_cost / temp)
+
+
+@jit
+def _translate(model, state, temp, new):
+    """Propose moving a random non-inlet node by a uniform random displacement (``new``: scratch (3,))."""
+    rng = state.rng
+    pos = state.position
+    k_in = model.n_inlets
+    first_bif = k_in + model.n_terminals
+    n_nodes = state.parent.size
+    if model.move_terminals:
+        i = k_in + next_below(rng, n_nodes - k_in)
+    else:
+        if n_nodes == first_bif:
+            return ILLEGAL
+        i = first_bif + next_below(rng, n_nodes - first_bif)
+    half = state.step_size[0 if i < first_bif else 1]
+    for a in range(3):
+        new[a] = pos[i, a] + (2.0 * next_double(rng) - 1.0) * half
+    if model.planar:
+        new[2] = pos[i, 2]
+    return translate_node(model, state, i, new, temp)
+
+
+@jit
+def translate_node(model, state, i, new, temp):
+    """Propose moving node i to ``new``; Metropolis at ``temp``. Returns ILLEGAL, REJECTED or ACCEPTED.
+
+    A terminal must land in tissue, a bifurcation inside the grid's box.
+    """
+    tables = model.tables
+    rng = state.rng
+    pos = state.position
+    first_bif = model.n_inlets + model.n_terminals
+    is_terminal = i < first_bif
+    cls = 0 if is_terminal else 1
+    state.counters[COUNTER_TERMINAL_PROPOSED + 2 * cls] += 1
+    if is_terminal:
+        nz, ny, nx = model.mask.shape
+        ux, uy, uz = _voxel_coords(model, new[0], new[1], new[2])
+        ix = math.floor(ux + 0.5)
+        iy = math.floor(uy + 0.5)
+        iz = math.floor(uz + 0.5)
+        if ix < 0 or iy < 0 or iz < 0 or ix >= nx or iy >= ny or iz >= nz or model.mask[iz, iy, ix] == 0:
+            return ILLEGAL
+    else:
+        for a in range(3):
+            if new[a] < model.box_lo[a] or new[a] > model.box_hi[a]:
+                return ILLEGAL
+    # The moved node's own segment and (for a bifurcation) its children's change length.
+    p = state.parent[i]
+    n = state.n_downstream[i]
+    len_i = _distance3(new, pos[p])
+    d_len = len_i - state.seg_length[i]
+    d_vol = tables[T_VOLUME, n] * d_len
+    d_pow = tables[T_POWER, n] * d_len
+    d_exc = 0.0
+    exc_i = 0.0
+    if model.exclusion_on:
+        exc_i = segment_exclusion(model, new, pos[p])
+        d_exc = tables[T_EXCLUSION, n] * (exc_i - state.seg_exclusion[i])
+    c0 = state.children[i, 0]
+    c1 = state.children[i, 1]
+    len_c0 = 0.0
+    len_c1 = 0.0
+    exc_c0 = 0.0
+    exc_c1 = 0.0
+    if not is_terminal:
+        n0 = state.n_downstream[c0]
+        n1 = state.n_downstream[c1]
+        len_c0 = _distance3(pos[c0], new)
+        len_c1 = _distance3(pos[c1], new)
+        d_vol += tables[T_VOLUME, n0] * (len_c0 - state.seg_length[c0]) + tables[T_VOLUME, n1] * (
+            len_c1 - state.seg_length[c1])
+        d_pow += tables[T_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[T_POWER, n1] * (
+            len_c1 - state.seg_length[c1])
+        if model.exclusion_on:
+            exc_c0 = segment_exclusion(model, pos[c0], new)
+            exc_c1 = segment_exclusion(model, pos[c1], new)
+            d_exc += tables[T_EXCLUSION, n0] * (exc_c0 - state.seg_exclusion[c0]) + tables[T_EXCLUSION, n1] * (
+                exc_c1 - state.seg_exclusion[c1])
+    d_sup = 0.0
+    if is_terminal and model.supply_on:
+        d_sup = supply_move_delta(model, state.supply, pos[i], new)
+    new_pressure = 0.0
+    d_pre = 0.0
+    if model.pressure_on:  # tentatively apply: C_p is recomputed in full
+        o0 = pos[i, 0]
+        o1 = pos[i, 1]
+        o2 = pos[i, 2]
+        old_len_i = state.seg_length[i]
+        pos[i, 0] = new[0]
+        pos[i, 1] = new[1]
+        pos[i, 2] = new[2]
+        state.seg_length[i] = len_i
+        if not is_terminal:
+            old_len_c0 = state.seg_length[c0]
+            old_len_c1 = state.seg_length[c1]
+            state.seg_length[c0] = len_c0
+            state.seg_length[c1] = len_c1
+        new_pressure = pressure_cost(model, state)
+        d_pre = new_pressure - state.costs[PRESSURE]
+        pos[i, 0] = o0
+        pos[i, 1] = o1
+        pos[i, 2] = o2
+        state.seg_length[i] = old_len_i
+        if not is_terminal:
+            state.seg_length[c0] = old_len_c0
+            state.seg_length[c1] = old_len_c1
+    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + model.w_supply * d_sup
+    if not _accept(d_cost, temp, rng):
+        return REJECTED
+    state.counters[COUNTER_TERMINAL_ACCEPTED + 2 * cls] += 1
+    if is_terminal and model.supply_on:
+        supply_move(model, state.supply, pos[i], new)
+    pos[i, 0] = new[0]
+    pos[i, 1] = new[1]
+    pos[i, 2] = new[2]
+    state.seg_length[i] = len_i
+    state.seg_exclusion[i] = exc_i
+    if not is_terminal:
+        state.seg_length[c0] = len_c0
+        state.seg_length[c1] = len_c1
+        state.seg_exclusion[c0] = exc_c0
+        state.seg_exclusion[c1] = exc_c1
+    _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure)
+    return ACCEPTED
+
+
+@jit
+def _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure):
+    """Add an accepted move's deltas to the running sums."""
+    costs = state.costs
+    comp = state.compensation
+    _add(costs, comp, VOLUME, d_vol)
+    _add(costs, comp, POWER, d_pow)
+    if model.exclusion_on:
+        _add(costs, comp, EXCLUSION, d_exc)
+    costs[SUPPLY] += d_sup  # integer-valued: exact in float64
+    if model.pressure_on:  # recomputed in full for the move: take it as is, no drift
+        costs[PRESSURE] = new_pressure
+        comp[PRESSURE] = 0.0
+
+
+@jit
+def _path_delta(model, state, start, stop, dn):
+    """Volume, power and exclusion change when n changes by dn on the path start .. stop (exclusive)."""
+    tables = model.tables
+    d_vol = 0.0
+    d_pow = 0.0
+    d_exc = 0.0
+    x = start
+    while x != stop:
+        if state.parent[x] >= 0:  # inlets have no segment
+            n0 = state.n_downstream[x]
+            n1 = n0 + dn
+            length = state.seg_length[x]
+            d_vol += (tables[T_VOLUME, n1] - tables[T_VOLUME, n0]) * length
+            d_pow += (tables[T_POWER, n1] - tables[T_POWER, n0]) * length
+            if model.exclusion_on:
+                d_exc += (tables[T_EXCLUSION, n1] - tables[T_EXCLUSION, n0]) * state.seg_exclusion[x]
+        x = state.parent[x]
+    return d_vol, d_pow, d_exc
+
+
+@jit
+def _exchange_parents(state, a, b, lca):
+    """Hang a where b hung and b where a hung; fix the downstream counts up to the LCA.
+
+    Applying it twice restores the tree, which is how a tentative swap is undone.
+    """
+    pa = state.parent[a]
+    pb = state.parent[b]
+    dn = state.n_downstream[b] - state.n_downstream[a]
+    for s in range(2):
+        if state.children[pa, s] == a:
+            state.children[pa, s] = b
+        if state.children[pb, s] == b:
+            state.children[pb, s] = a
+    state.parent[a] = pb
+    state.parent[b] = pa
+    x = pa
+    while x != lca:
+        state.n_downstream[x] += dn
+        x = state.parent[x]
+    x = pb
+    while x != lca:
+        state.n_downstream[x] -= dn
+        x = state.parent[x]
+
+
+@jit
+def _swap(model, state, temp):
+    """Propose exchanging the parents of two distinct random non-inlet nodes."""
+    rng = state.rng
+    k_in = model.n_inlets
+    n_movable = state.parent.size - k_in
+    a = k_in + next_below(rng, n_movable)
+    b = k_in + next_below(rng, n_movable - 1)
+    if b >= a:
+        b += 1
+    return swap_nodes(model, state, a, b, temp)
+
+
+@jit
+def swap_nodes(model, state, a, b, temp):
+    """Propose hanging a where b hangs and b where a hangs (SPEC section 2).
+
+    Siblings, and pairs where one is an ancestor of the other, are ILLEGAL. Returns
+    ILLEGAL, REJECTED or ACCEPTED.
+    """
+    tables = model.tables
+    rng = state.rng
+    pos = state.position
+    parent = state.parent
+    state.counters[COUNTER_SWAP_PROPOSED] += 1
+    pa = parent[a]
+    pb = parent[b]
+    if pa == pb:  # siblings: the swap changes nothing
+        return ILLEGAL
+    # Mark a's ancestors; b among them, or a among b's, would close a loop.
+    stamp = state.counters[COUNTER_STEP] + 1
+    mark = state.scratch_mark
+    x = pa
+    while x >= 0:
+        if x == b:
+            return ILLEGAL
+        mark[x] = stamp
+        x = parent[x]
+    lca = -1  # stays -1 when a and b hang from different inlets
+    x = pb
+    while x >= 0:
+        if x == a:
+            return ILLEGAL
+        if mark[x] == stamp:
+            lca = x
+            break
+        x = parent[x]
+    na = state.n_downstream[a]
+    nb = state.n_downstream[b]
+    d_vol = 0.0
+    d_pow = 0.0
+    d_exc = 0.0
+    if na != nb:
+        v, w, e = _path_delta(model, state, pa, lca, nb - na)
+        d_vol += v
+        d_pow += w
+        d_exc += e
+        v, w, e = _path_delta(model, state, pb, lca, na - nb)
+        d_vol += v
+        d_pow += w
+        d_exc += e
+    new_len_a = _distance3(pos[a], pos[pb])
+    new_len_b = _distance3(pos[b], pos[pa])
+    d_vol += tables[T_VOLUME, na] * (new_len_a - state.seg_length[a]) + tables[T_VOLUME, nb] * (
+        new_len_b - state.seg_length[b])
+    d_pow += tables[T_POWER, na] * (new_len_a - state.seg_length[a]) + tables[T_POWER, nb] * (
+        new_len_b - state.seg_length[b])
+    new_exc_a = 0.0
+    new_exc_b = 0.0
+    if model.exclusion_on:
+        new_exc_a = segment_exclusion(model, pos[a], pos[pb])
+        new_exc_b = segment_exclusion(model, pos[b], pos[pa])
+        d_exc += tables[T_EXCLUSION, na] * (new_exc_a - state.seg_exclusion[a]) + tables[T_EXCLUSION, nb] * (
+            new_exc_b - state.seg_exclusion[b])
+    old_len_a = state.seg_length[a]
+    old_len_b = state.seg_length[b]
+    d_pre = 0.0
+    new_pressure = 0.0
+    if model.pressure_on:  # tentatively apply: C_p is recomputed in full
+        _exchange_parents(state, a, b, lca)
+        state.seg_length[a] = new_len_a
+        state.seg_length[b] = new_len_b
+        new_pressure = pressure_cost(model, state)
+        d_pre = new_pressure - state.costs[PRESSURE]
+        _exchange_parents(state, a, b, lca)
+        state.seg_length[a] = old_len_a
+        state.seg_length[b] = old_len_b
+    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre
+    if not _accept(d_cost, temp, rng):
+        return REJECTED
+    state.counters[COUNTER_SWAP_ACCEPTED] += 1
+    _exchange_parents(state, a, b, lca)
+    state.seg_length[a] = new_len_a
+    state.seg_length[b] = new_len_b
+    state.seg_exclusion[a] = new_exc_a
+    state.seg_exclusion[b] = new_exc_b
+    _commit(model, state, d_vol, d_pow, d_exc, 0.0, new_pressure)
+    return ACCEPTED
+
+
+@jit
+def anneal_block(model, state, n_steps):
+    """Propose ``n_steps`` moves from ``state`` (in place), continuing its step count."""
+    new = np.empty(3)
+    for _ in range(n_steps):
+        step = state.counters[COUNTER_STEP]
+        temp = temperature(model, step)
+        if next_double(state.rng) < model.p_swap:
+            _swap(model, state, temp)
+        else:
+            _translate(model, state, temp, new)
+        state.counters[COUNTER_STEP] = step + 1

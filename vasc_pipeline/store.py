@@ -1,0 +1,440 @@
+"""The run store: one Zarr (v3) directory store per run, with atomic checkpoints.
+
+Layout (SPEC section 7)::
+
+    runs/<run_id>.zarr
+        attrs: run_id, seed, status ("running" | "complete"), steps_done, wall_seconds,
+               config, config_hash, physics, cost, cost_recomputed (complete runs), and
+               the pipeline's own: coords (grid point), total_steps, checkpoint (name of
+               the current checkpoint group), trace_length (committed trace records),
+               resumes (one {step, checkpoint} per resumed session), format
+        tree/{parent, position, radius, kind}       final tree (complete runs)
+        tissue/{mask, distance}                     the voxelised tissue, written at start
+        trace/{step, temperature, volume, ..., total, acceptance}   dim "step"
+        checkpoints/c<seq>/<state field>            kernel state (engine.state_arrays)
+
+Atomicity (SPEC section 8). ``LocalStore`` writes one key atomically (temp file + rename)
+but nothing more, so every multi-key update follows one rule: write new keys first, then
+flip one key (the root ``zarr.json``, i.e. the root attributes) that makes them valid.
+
+- A checkpoint is a new group ``checkpoints/c<seq>``: arrays first, then a manifest in the
+  group's attributes (shape, dtype and CRC-32 of every array), then the root attributes
+  ``checkpoint``, ``steps_done``, ``trace_length`` and ``wall_seconds`` in one write; only
+  then are older checkpoints pruned (the previous one is kept as a fallback).
+- Trace arrays grow by resize-then-write; records beyond the committed ``trace_length``
+  (a crash between the two, or records after the last checkpoint) are cut on resume.
+- On load every checkpoint's arrays are checked against its manifest (a missing chunk reads
+  back as fill values, a truncated one fails to decode); a bad checkpoint is skipped for the
+  previous good one with a :class:`CheckpointWarning`.
+
+One writer per store: :func:`run_lock` holds an ``fcntl`` lock on ``runs/.locks/<run_id>.lock``
+while a job writes (a worker the scheduler gave up on may still be running).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import math
+import os
+import warnings
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+import zarr
+
+from .config import ConfigError
+
+__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "run_path", "run_lock", "config_hash",
+           "hashed_config", "config_differences", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
+
+RUNS_DIR = "runs"
+STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
+FORMAT = "vasc_pipeline.run/1"
+CHECKPOINTS = "checkpoints"
+TRACE_CHUNK = 4096          # records per trace chunk: a few appends per chunk, small files
+
+# Config sections that do not change a run's result: where it is written, how often it
+# checkpoints, and how the sweep/cluster around it is organised. Everything else does.
+_UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
+
+# (name, dtype, units, long_name) of the trace variables; "step" is the dimension.
+TRACE_FIELDS = (
+    ("step", "int64", "1", "proposed moves so far"),
+    ("temperature", "float64", "W", "annealing temperature (cost units)"),
+    ("volume", "float64", "W", "C_v, metabolic cost of blood volume"),
+    ("power", "float64", "W", "C_w, pumping power"),
+    ("supply", "float64", "1", "C_s, supply cost (voxel count score)"),
+    ("exclusion", "float64", "m2", "C_o, large-vessel exclusion cost"),
+    ("pressure", "float64", "Pa2", "C_p, terminal pressure cost"),
+    ("total", "float64", "W", "annealed total cost C"),
+    ("acceptance", "float64", "1", "accepted fraction of the block's proposals"),
+)
+_TRACE_NAMES = tuple(f[0] for f in TRACE_FIELDS)
+
+
+class StoreError(OSError):
+    """A run store that cannot be read or written; the message names the path."""
+
+
+class CheckpointWarning(UserWarning):
+    """A checkpoint failed its checks and an older one (or a fresh start) is used instead."""
+
+
+def run_path(output_dir: str | os.PathLike, run_id: str) -> Path:
+    """``<output_dir>/runs/<run_id>.zarr``."""
+    return Path(output_dir) / RUNS_DIR / f"{run_id}.zarr"
+
+
+@contextlib.contextmanager
+def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
+    """Hold an exclusive lock on ``runs/.locks/<run_id>.lock`` (released on exit or process death).
+
+    A job whose worker was declared dead may still be running; the lock makes a resubmitted
+    copy wait for it instead of writing the same store at the same time.
+    """
+    path = Path(path)
+    lock_path = path.parent / ".locks" / (path.name.removesuffix(".zarr") + ".lock")
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_path, "a+") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError as exc:
+            raise StoreError(f"run store {str(path)!r} is being written by another process") from exc
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def hashed_config(config: Mapping[str, Any]) -> dict:
+    """The part of a run config that determines its result (see ``_UNHASHED``)."""
+    return {k: v for k, v in config.items() if k not in _UNHASHED}
+
+
+def config_hash(config: Mapping[str, Any]) -> str:
+    """SHA-256 of the result-determining config, canonical JSON (sorted keys)."""
+    text = json.dumps(hashed_config(config), sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(tree, Mapping):
+        out: dict[str, Any] = {}
+        for k, v in tree.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: tree}
+
+
+def config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
+    """Human-readable ``key: stored -> requested`` lines for every result-determining difference."""
+    a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
+    return [f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
+            for k in sorted(set(a) | set(b)) if a.get(k, "<absent>") != b.get(k, "<absent>")]
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain JSON types for attributes (numpy scalars and arrays, non-finite floats as strings)."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.integer, bool, np.bool_)):
+        return value.item() if isinstance(value, np.generic) else value
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    return value
+
+
+def _crc(data: np.ndarray) -> int:
+    return zlib.crc32(np.ascontiguousarray(data).view(np.uint8).reshape(-1).data)
+
+
+@dataclass
+class Checkpoint:
+    """A verified checkpoint: the state arrays and where the run stood."""
+
+    name: str
+    arrays: dict[str, np.ndarray]
+    step: int
+    trace_length: int
+    wall_seconds: float
+
+
+class RunStore:
+    """One run's Zarr store. Create with :meth:`create`, reopen with :meth:`open`."""
+
+    def __init__(self, path: Path, group: zarr.Group) -> None:
+        self.path = Path(path)
+        self.group = group
+
+    # -- creation and opening ---------------------------------------------------------------
+
+    @classmethod
+    def create(cls, path: str | os.PathLike, *, run_id: str, seed: int, config: Mapping[str, Any],
+               coords: Mapping[str, Any], total_steps: int) -> "RunStore":
+        """A new store (refuses to overwrite) holding the run's identity and ``status="running"``."""
+        path = Path(path)
+        config = _jsonable(config)
+        attrs = {
+            "format": FORMAT, "run_id": run_id, "seed": int(seed), "status": STATUS_RUNNING, "steps_done": 0,
+            "total_steps": int(total_steps), "wall_seconds": 0.0, "config": config,
+            "config_hash": config_hash(config), "coords": _jsonable(coords), "checkpoint": None,
+            "trace_length": 0, "resumes": []}
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
+        except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
+            raise StoreError(f"run store {str(path)!r} already exists") from exc
+        store = cls(path, group)
+        store._create_trace()
+        return store
+
+    @classmethod
+    def open(cls, path: str | os.PathLike, mode: str = "r+") -> "RunStore":
+        """Open an existing store; :class:`StoreError` names the path if it is not a readable run store."""
+        path = Path(path)
+        if not (path / "zarr.json").is_file():
+            raise StoreError(f"{str(path)!r} is not a run store (no zarr.json)")
+        try:
+            # Finished stores carry consolidated metadata; unfinished ones must be read live.
+            group = zarr.open_group(str(path), mode=mode, zarr_format=3)
+            attrs = dict(group.attrs)
+        except Exception as exc:  # a damaged zarr.json: nothing in it can be trusted
+            raise StoreError(f"run store {str(path)!r} is unreadable ({exc}); move it away to restart "
+                             "that run") from exc
+        if attrs.get("format") != FORMAT or "config_hash" not in attrs:
+            raise StoreError(f"{str(path)!r} is not a vasc_pipeline run store (attrs format={attrs.get('format')!r})")
+        return cls(path, group)
+
+    @staticmethod
+    def exists(path: str | os.PathLike) -> bool:
+        return (Path(path) / "zarr.json").is_file()
+
+    # -- attributes -------------------------------------------------------------------------
+
+    @property
+    def attrs(self) -> dict[str, Any]:
+        return dict(self.group.attrs)
+
+    @property
+    def status(self) -> str:
+        return self.group.attrs["status"]
+
+    @property
+    def run_id(self) -> str:
+        return self.group.attrs["run_id"]
+
+    def _set_attrs(self, **values: Any) -> None:
+        """One atomic write of the root ``zarr.json`` with the given attributes changed."""
+        self.group.update_attributes(_jsonable(values))
+
+    def check_config(self, config: Mapping[str, Any]) -> None:
+        """Refuse (:class:`ConfigError`) a requested config whose result-determining part differs."""
+        requested = _jsonable(config)
+        if config_hash(requested) == self.group.attrs["config_hash"]:
+            return
+        diff = config_differences(self.group.attrs["config"], requested)
+        raise ConfigError(
+            f"run {self.run_id!r} in {str(self.path)!r} was started with a different configuration, and runs "
+            f"are never mixed: {'; '.join(diff) or 'config hash differs'}. Restore those settings to resume it, "
+            "or choose a new output_dir (output_dir=...) for the changed configuration.")
+
+    # -- tissue -----------------------------------------------------------------------------
+
+    def write_start(self, tissue, physics: Mapping[str, Any]) -> None:
+        """At a run's first start: the ``physics`` attribute and the voxelised tissue."""
+        self._set_attrs(physics=dict(physics))
+        self.write_tissue(tissue)
+
+    def write_tissue(self, tissue) -> None:
+        """``tissue/mask`` (uint8) and ``tissue/distance`` (float32, voxel units), dims (z, y, x)."""
+        attrs = {"voxel_size": float(tissue.voxel_size), "origin": [float(v) for v in tissue.origin],
+                 "units_voxel_size": "m", "name": tissue.name, "ndim": int(tissue.ndim)}
+        group = self.group.require_group("tissue")
+        group.update_attributes(attrs)
+        dims = ["z", "y", "x"]
+        mask = group.create_array("mask", shape=tissue.mask.shape, dtype="uint8", chunks=tissue.mask.shape,
+                                  dimension_names=dims, overwrite=True,
+                                  attributes={**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"})
+        mask[...] = tissue.mask
+        dist = group.create_array("distance", shape=tissue.distance.shape, dtype="float32",
+                                  chunks=tissue.distance.shape, dimension_names=dims, overwrite=True,
+                                  attributes={"long_name": "distance to the nearest non-tissue voxel",
+                                              "units": "voxel"})
+        dist[...] = tissue.distance
+
+    def has_tissue(self) -> bool:
+        try:
+            return "tissue" in self.group and "distance" in self.group["tissue"]
+        except Exception:
+            return False
+
+    # -- trace ------------------------------------------------------------------------------
+
+    def _create_trace(self) -> None:
+        group = self.group.require_group("trace")
+        for name, dtype, units, long_name in TRACE_FIELDS:
+            group.create_array(name, shape=(0,), chunks=(TRACE_CHUNK,), dtype=dtype, dimension_names=["step"],
+                               fill_value=0 if dtype == "int64" else np.nan, overwrite=True,
+                               attributes={"units": units, "long_name": long_name})
+
+    @property
+    def trace_length(self) -> int:
+        """Committed trace records (records beyond it are not part of the run)."""
+        return int(self.group.attrs["trace_length"])
+
+    def set_trace_length(self, length: int) -> None:
+        """Cut the trace arrays back to ``length`` records (resume after a crash or a fallback)."""
+        for name in _TRACE_NAMES:
+            arr = self.group[f"trace/{name}"]
+            if arr.shape[0] != length:
+                arr.resize((length,))
+
+    def append_trace(self, rows: Mapping[str, np.ndarray], start: int) -> int:
+        """Write trace ``rows`` at record ``start``; returns the new (not yet committed) length."""
+        n = len(rows["step"])
+        for name in _TRACE_NAMES:
+            arr = self.group[f"trace/{name}"]
+            arr.resize((start + n,))  # resize first, write second: a crash leaves fill values
+            if n:
+                arr[start:start + n] = rows[name]
+        return start + n
+
+    def read_trace(self) -> dict[str, np.ndarray]:
+        """Committed trace records."""
+        n = self.trace_length
+        return {name: self.group[f"trace/{name}"][:n] for name in _TRACE_NAMES}
+
+    # -- checkpoints ------------------------------------------------------------------------
+
+    def _checkpoint_names(self) -> list[str]:
+        # From the directory listing, not zarr's member listing: that one parses every
+        # member's metadata and fails as a whole on one damaged checkpoint.
+        root = self.path / CHECKPOINTS
+        return sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+
+    def write_checkpoint(self, arrays: Mapping[str, np.ndarray], *, step: int, trace_length: int,
+                         wall_seconds: float) -> str:
+        """Write a new checkpoint group, flip the root pointer to it, prune; returns its name."""
+        names = self._checkpoint_names()
+        seq = int(names[-1][1:]) + 1 if names else 1
+        name = f"c{seq:09d}"
+        group = self.group.require_group(CHECKPOINTS).create_group(name)
+        manifest = {}
+        for key, data in arrays.items():
+            data = np.ascontiguousarray(data)
+            arr = group.create_array(key, shape=data.shape, dtype=data.dtype, chunks=data.shape or None)
+            arr[...] = data
+            manifest[key] = {"shape": list(data.shape), "dtype": data.dtype.str, "crc32": _crc(data)}
+        # The manifest is the group's last key: a checkpoint without one is incomplete.
+        group.update_attributes({"manifest": manifest, "step": int(step), "trace_length": int(trace_length),
+                                 "wall_seconds": float(wall_seconds)})
+        previous = self.group.attrs.get("checkpoint")
+        self._set_attrs(checkpoint=name, steps_done=int(step), trace_length=int(trace_length),
+                        wall_seconds=float(wall_seconds))
+        # Keep the new checkpoint and the one committed before it (the fallback); anything
+        # else is older or a partial leftover of a crashed write.
+        for n in names:
+            if n != previous:
+                del self.group[CHECKPOINTS][n]
+        return name
+
+    def _read_checkpoint(self, name: str) -> Checkpoint:
+        """Read and verify one checkpoint; raises ValueError (or a zarr/codec error) when bad."""
+        group = self.group[f"{CHECKPOINTS}/{name}"]
+        meta = dict(group.attrs)
+        manifest = meta.get("manifest")
+        if not manifest:
+            raise ValueError("no manifest (written partially)")
+        arrays = {}
+        for key, info in manifest.items():
+            data = group[key][...]
+            if list(data.shape) != info["shape"] or data.dtype.str != info["dtype"]:
+                raise ValueError(f"array {key!r} has shape {data.shape} {data.dtype.str}, expected "
+                                 f"{tuple(info['shape'])} {info['dtype']}")
+            if _crc(data) != info["crc32"]:
+                raise ValueError(f"array {key!r} fails its CRC-32 check")
+            arrays[key] = data
+        return Checkpoint(name, arrays, int(meta["step"]), int(meta["trace_length"]), float(meta["wall_seconds"]))
+
+    def load_checkpoint(self) -> Checkpoint | None:
+        """The newest good checkpoint at or before the root pointer, or None (start afresh).
+
+        A checkpoint that fails to read or verify is reported with a :class:`CheckpointWarning`
+        and the previous one is tried.
+        """
+        current = self.group.attrs.get("checkpoint")
+        if current is None:
+            return None
+        names = [n for n in self._checkpoint_names() if n <= current]
+        if current not in names:
+            warnings.warn(f"{self.path}: checkpoint {current} is missing", CheckpointWarning, stacklevel=2)
+        for name in reversed(names):
+            try:
+                return self._read_checkpoint(name)
+            except Exception as exc:  # any failure to read or verify means: not a good checkpoint
+                warnings.warn(f"{self.path}: checkpoint {name} is truncated or corrupted ({exc}); "
+                              "falling back to the previous good checkpoint", CheckpointWarning, stacklevel=2)
+        warnings.warn(f"{self.path}: no good checkpoint left; the run restarts from step 0",
+                      CheckpointWarning, stacklevel=2)
+        return None
+
+    def record_resume(self, checkpoint: Checkpoint | None) -> None:
+        """Note in the attributes where this session starts (step 0 for a fresh start)."""
+        entry = {"step": checkpoint.step if checkpoint else 0, "checkpoint": checkpoint.name if checkpoint else None}
+        resumes = list(self.group.attrs.get("resumes", [])) + [entry]
+        if checkpoint is None:  # a restart from scratch also forgets any committed progress
+            self._set_attrs(resumes=resumes, checkpoint=None, steps_done=0, trace_length=0, wall_seconds=0.0)
+        else:
+            self._set_attrs(resumes=resumes, steps_done=checkpoint.step, trace_length=checkpoint.trace_length,
+                            wall_seconds=checkpoint.wall_seconds)
+
+    # -- completion -------------------------------------------------------------------------
+
+    def write_final(self, *, parent: np.ndarray, position: np.ndarray, radius: np.ndarray, kind: np.ndarray,
+                    physics: Mapping[str, Any], cost: Mapping[str, float], cost_recomputed: Mapping[str, float],
+                    steps_done: int, trace_length: int, wall_seconds: float) -> None:
+        """Write the final tree, then mark the run complete in one attribute write, then tidy up."""
+        group = self.group.require_group("tree")
+        specs = (("parent", parent, "int64", ["node"], "parent node (-1 at inlets)", "1"),
+                 ("position", position, "float64", ["node", "xyz"], "node position", "m"),
+                 ("radius", radius, "float64", ["node"], "radius of the segment ending at the node", "m"),
+                 ("kind", kind, "int8", ["node"], "node kind: 0 inlet, 1 bifurcation, 2 terminal", "1"))
+        for name, data, dtype, dims, long_name, units in specs:
+            data = np.ascontiguousarray(data, dtype=dtype)
+            arr = group.create_array(name, shape=data.shape, dtype=dtype, chunks=data.shape, dimension_names=dims,
+                                     overwrite=True, attributes={"long_name": long_name, "units": units})
+            arr[...] = data
+        self._set_attrs(status=STATUS_COMPLETE, checkpoint=None, steps_done=int(steps_done),
+                        trace_length=int(trace_length), wall_seconds=float(wall_seconds), physics=dict(physics),
+                        cost=dict(cost),
+                        cost_recomputed=dict(cost_recomputed))
+        self.tidy()
+
+    def tidy(self) -> None:
+        """For a complete run: drop checkpoints, cut the trace to its committed length, consolidate.
+
+        Idempotent, so a crash in here is repaired by the next sweep that finds the run complete.
+        """
+        if CHECKPOINTS in self.group:
+            del self.group[CHECKPOINTS]
+        self.set_trace_length(self.trace_length)
+        with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
+            warnings.simplefilter("ignore")
+            zarr.consolidate_metadata(str(self.path))
+        self.group = zarr.open_group(str(self.path), mode="r+", zarr_format=3)
+
+    def is_tidy(self) -> bool:
+        return CHECKPOINTS not in self.group and self.group.metadata.consolidated_metadata is not None
+
+    def read_tree(self) -> dict[str, np.ndarray]:
+        """The final tree arrays (complete runs)."""
+        return {name: self.group[f"tree/{name}"][...] for name in ("parent", "position", "radius", "kind")}

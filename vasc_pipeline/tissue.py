@@ -1,0 +1,265 @@
+"""Tissue domains as voxel grids (SPEC section 3).
+
+A :class:`Tissue` is a binary voxel mask (z, y, x) with isotropic voxels, the position of
+the centre of voxel [0, 0, 0], the Euclidean distance transform of the tissue (scipy),
+and the inlet positions. Builders return one for each named domain: ``sphere``, ``box``,
+``plane2d``, ``heart`` (see :mod:`vasc_pipeline.heart`) and ``mask`` (a user's array).
+
+The grid always extends beyond the tissue (at least one voxel, and a margin where large
+vessels are expected to run outside the tissue) so that the distance transform sees a
+boundary and bifurcations and inlets have room outside the tissue.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["Tissue", "TissueError", "build_tissue", "voxelize", "TISSUES"]
+
+# Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
+# ~270 voxels per supply sphere at every N (SPEC section 3).
+VOXELS_PER_SUPPLY_RADIUS = 4.0
+
+
+class TissueError(ValueError):
+    """A tissue configuration that cannot be built; the message names the field."""
+
+
+@dataclass
+class Tissue:
+    """A voxelised tissue domain.
+
+    Attributes
+    ----------
+    name : str
+    mask : uint8 ndarray (nz, ny, nx)
+        1 = tissue.
+    voxel_size : float
+        Edge of the isotropic voxels [m].
+    origin : float64 ndarray (3,)
+        [x, y, z] of the centre of voxel [0, 0, 0] [m].
+    inlets : float64 ndarray (K, 3)
+        Inlet positions [m].
+    ndim : int
+        3, or 2 for a single voxel layer at z = origin[2] (all nodes stay in that plane).
+    inlet_names : tuple of str
+    distance : float32 ndarray (nz, ny, nx)
+        Distance of each tissue voxel to the nearest non-tissue voxel, in voxel units
+        (0 outside tissue).
+    """
+
+    name: str
+    mask: np.ndarray
+    voxel_size: float
+    origin: np.ndarray
+    inlets: np.ndarray
+    ndim: int = 3
+    inlet_names: tuple[str, ...] = ()
+    distance: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.mask = np.ascontiguousarray(self.mask, dtype=np.uint8)
+        self.origin = np.asarray(self.origin, dtype=np.float64).reshape(3)
+        self.inlets = np.atleast_2d(np.asarray(self.inlets, dtype=np.float64))
+        if self.mask.ndim != 3:
+            raise TissueError(f"tissue mask must be 3-D (z, y, x) after loading, got shape {self.mask.shape}")
+        if not self.mask.any():
+            raise TissueError(f"tissue '{self.name}': the mask holds no tissue voxel")
+        if not (self.voxel_size > 0 and math.isfinite(self.voxel_size)):
+            raise TissueError(f"tissue.voxel_size must be a positive length in metres, got {self.voxel_size}")
+        if self.ndim == 2 and self.mask.shape[0] != 1:
+            raise TissueError("a 2-D tissue has exactly one voxel layer")
+        if self.inlets.shape[1] != 3 or len(self.inlets) < 1:
+            raise TissueError(f"tissue.inlets must be a list of [x, y, z] positions in metres, got {self.inlets.tolist()}")
+        if not self.inlet_names:
+            self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
+        lo, hi = self.bounds
+        for k, p in enumerate(self.inlets):
+            if np.any(p < lo) or np.any(p > hi):
+                raise TissueError(
+                    f"inlet {k} ({self.inlet_names[k]}) at {p.tolist()} m lies outside the voxel grid "
+                    f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid")
+        # Distance to the nearest non-tissue voxel. The builders pad the grid, but a
+        # user's mask may touch its edge: pad here so the grid edge counts as outside.
+        padded = np.pad(self.mask, 1) if self.ndim == 3 else np.pad(self.mask, ((0, 0), (1, 1), (1, 1)))
+        dist = ndimage.distance_transform_edt(padded)
+        self.distance = np.ascontiguousarray(
+            dist[1:-1, 1:-1, 1:-1] if self.ndim == 3 else dist[:, 1:-1, 1:-1], dtype=np.float32)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.mask.shape
+
+    @property
+    def n_tissue_voxels(self) -> int:
+        return int(np.count_nonzero(self.mask))
+
+    @property
+    def measure(self) -> float:
+        """Tissue volume [m^3] (area [m^2] for a 2-D tissue) as voxelised."""
+        return self.n_tissue_voxels * self.voxel_size ** self.ndim
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper [x, y, z] corners of the voxel grid's box [m]."""
+        nz, ny, nx = self.mask.shape
+        half = 0.5 * self.voxel_size
+        lo = self.origin - half
+        hi = self.origin + np.array([nx - 1, ny - 1, nz - 1]) * self.voxel_size + half
+        if self.ndim == 2:  # the plane itself: z is fixed
+            lo[2] = hi[2] = self.origin[2]
+        return lo, hi
+
+    def voxel_index(self, points: np.ndarray) -> np.ndarray:
+        """(z, y, x) integer voxel indices of points (..., 3) [m]; may lie outside the grid."""
+        u = (np.asarray(points, dtype=np.float64) - self.origin) / self.voxel_size
+        return np.floor(u[..., ::-1] + 0.5).astype(np.int64)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """True where a point lies in a tissue voxel."""
+        idx = self.voxel_index(points)
+        inside = np.all((idx >= 0) & (idx < np.array(self.mask.shape)), axis=-1)
+        out = np.zeros(inside.shape, dtype=bool)
+        sel = idx[inside]
+        out[inside] = self.mask[sel[:, 0], sel[:, 1], sel[:, 2]] == 1
+        return out
+
+
+def voxelize(inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray], lo, hi, voxel_size: float,
+             margin: float = 0.0, ndim: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Mask of voxels whose centre satisfies ``inside(x, y, z)`` over the box [lo, hi].
+
+    The grid covers the box plus ``margin`` [m] and at least one voxel on every side
+    (in-plane only for ``ndim == 2``). Returns (mask uint8 (z, y, x), origin [x, y, z]).
+    """
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    pad = margin + voxel_size
+    counts = np.ceil((hi - lo + 2 * pad) / voxel_size).astype(int)
+    centre = 0.5 * (lo + hi)
+    origin = centre - 0.5 * (counts - 1) * voxel_size
+    if ndim == 2:
+        counts[2] = 1
+        origin[2] = lo[2]
+    axes = [origin[a] + voxel_size * np.arange(counts[a]) for a in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    return inside(x, y, z).astype(np.uint8), origin
+
+
+def _default_voxel_size(n_terminals: int, measure: float, ndim: int) -> float:
+    """R_supply / 4 for the given tissue measure (volume, or area in 2-D)."""
+    if ndim == 2:
+        r_supply = math.sqrt(measure / n_terminals / math.pi)
+    else:
+        r_supply = (3.0 * measure / n_terminals / (4.0 * math.pi)) ** (1.0 / 3.0)
+    return r_supply / VOXELS_PER_SUPPLY_RADIUS
+
+
+def sphere(n_terminals: int, radius: float = 0.02, voxel_size: float | None = None, **_) -> Tissue:
+    """A ball of tissue centred at the origin; the inlet sits just above its north pole."""
+    if not radius > 0:
+        raise TissueError(f"tissue.radius must be a positive length in metres, got {radius}")
+    h = voxel_size or _default_voxel_size(n_terminals, 4.0 / 3.0 * math.pi * radius**3, 3)
+    mask, origin = voxelize(lambda x, y, z: x**2 + y**2 + z**2 <= radius**2,
+                            [-radius] * 3, [radius] * 3, h, margin=0.25 * radius)
+    return Tissue("sphere", mask, h, origin, [[0.0, 0.0, radius + 0.1 * radius]], inlet_names=("root",))
+
+
+def box(n_terminals: int, size: tuple[float, float, float] = (0.04, 0.04, 0.02), voxel_size: float | None = None,
+        **_) -> Tissue:
+    """A rectangular block [0, size] of tissue; the inlet sits above the centre of its top face."""
+    size = np.asarray(size, dtype=np.float64)
+    if size.shape != (3,) or np.any(size <= 0):
+        raise TissueError(f"tissue.size must be three positive lengths [x, y, z] in metres, got {size.tolist()}")
+    h = voxel_size or _default_voxel_size(n_terminals, float(np.prod(size)), 3)
+    mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= size[0]) & (y >= 0) & (y <= size[1])
+                            & (z >= 0) & (z <= size[2]), [0, 0, 0], size, h, margin=0.1 * size.min())
+    inlet = [0.5 * size[0], 0.5 * size[1], size[2] + 0.05 * size.min()]
+    return Tissue("box", mask, h, origin, [inlet], inlet_names=("root",))
+
+
+def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None, **_) -> Tissue:
+    """The paper's convergence test: a side x side square in the plane z = 0, inlet at a corner."""
+    if not side > 0:
+        raise TissueError(f"tissue.side must be a positive length in metres, got {side}")
+    h = voxel_size or _default_voxel_size(n_terminals, side**2, 2)
+    mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= side) & (y >= 0) & (y <= side),
+                            [0, 0, 0], [side, side, 0], h, ndim=2)
+    return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
+
+
+def heart(n_terminals: int, voxel_size: float | None = None, **params) -> Tissue:
+    """The paper's coronary substrate; see :mod:`vasc_pipeline.heart`."""
+    from . import heart as heart_model
+
+    return heart_model.heart_tissue(n_terminals, voxel_size=voxel_size, **params)
+
+
+def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = None, origin=None,
+         inlets=None, array: str | None = None, **_) -> Tissue:
+    """A user's voxel mask from a ``.npy`` file or a Zarr array (medical-image segmentations).
+
+    ``path`` names a ``.npy`` file or a Zarr store (``array`` then names the array inside
+    it, default the store's root array). The array is (z, y, x) or (y, x) for a 2-D tissue,
+    nonzero = tissue. ``voxel_size`` [m] and ``origin`` (the [x, y, z] of the centre of voxel
+    [0, 0, 0], m) come from the config, else from the Zarr array's attrs of the same names.
+    ``inlets`` is a list of [x, y, z] positions [m].
+    """
+    if not path:
+        raise TissueError("tissue.path is required for tissue=mask: a .npy file or a Zarr array")
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise TissueError(f"tissue.path: mask file {str(p)!r} does not exist")
+    attrs: dict = {}
+    try:
+        if p.suffix == ".npy":
+            data = np.load(p, allow_pickle=False)
+        else:
+            import zarr
+
+            node = zarr.open(str(p), mode="r")
+            if array:
+                node = node[array]
+            if not hasattr(node, "shape"):
+                raise TissueError(f"tissue.path: {str(p)!r} is a Zarr group; name the mask with tissue.array")
+            data = node[...]
+            attrs = dict(node.attrs)
+    except TissueError:
+        raise
+    except Exception as exc:  # unreadable file: say which and why
+        raise TissueError(f"tissue.path: cannot read mask {str(p)!r}: {exc}") from exc
+    if data.ndim not in (2, 3):
+        raise TissueError(f"tissue.path: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
+    if data.size == 0 or not np.any(data):
+        raise TissueError(f"tissue.path: the mask {str(p)!r} is empty (no nonzero voxel)")
+    ndim = data.ndim
+    h = voxel_size if voxel_size is not None else attrs.get("voxel_size")
+    if h is None or not float(h) > 0:
+        raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
+    org = origin if origin is not None else attrs.get("origin", [0.0, 0.0, 0.0])
+    org = np.asarray(org, dtype=np.float64)
+    if org.shape != (3,):
+        raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
+    if inlets is None:
+        raise TissueError("tissue.inlets is required for tissue=mask: a list of [x, y, z] positions in metres")
+    grid = (np.asarray(data) != 0).astype(np.uint8)
+    if ndim == 2:
+        grid = grid[None]
+    return Tissue("mask", grid, float(h), org, inlets, ndim=ndim)
+
+
+TISSUES: dict[str, Callable[..., Tissue]] = {
+    "heart": heart, "plane2d": plane2d, "sphere": sphere, "box": box, "mask": mask}
+
+
+def build_tissue(name: str, n_terminals: int, **params) -> Tissue:
+    """Build the named tissue for ``n_terminals`` terminals (params: the tissue config)."""
+    if name not in TISSUES:
+        raise TissueError(f"tissue.name: unknown tissue {name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    return TISSUES[name](n_terminals, **params)

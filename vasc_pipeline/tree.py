@@ -1,0 +1,212 @@
+"""The tree as flat arrays: layout, random initialisation, invariants.
+
+Node layout (fixed for a run): inlets ``[0, K)``, terminals ``[K, K + N)``, bifurcations
+``[K + N, 2N)``; 2N nodes in all. Every non-inlet node has one parent; a segment is
+identified by its child node (the vessel from a node to its parent), so per-segment arrays
+are indexed by node and hold 0 at inlets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import rng as _rng
+from .tissue import Tissue
+
+__all__ = ["KIND_INLET", "KIND_BIFURCATION", "KIND_TERMINAL", "Tree", "node_kinds", "random_tree",
+           "count_terminals", "check_tree", "load_terminal_sites", "TreeError"]
+
+KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
+
+
+class TreeError(ValueError):
+    """A tree that breaks an invariant, or bad terminal-site input."""
+
+
+@dataclass
+class Tree:
+    """Topology and geometry of a tree (the mutable part of the anneal state).
+
+    Attributes
+    ----------
+    parent : int64 (2N,)        parent node, -1 at inlets
+    children : int64 (2N, 2)    child nodes, -1 where absent (inlets use slot 0 only)
+    position : float64 (2N, 3)  [x, y, z] in metres
+    n_downstream : int64 (2N,)  terminals downstream of the node (its segment's n)
+    n_inlets : int              K
+    """
+
+    parent: np.ndarray
+    children: np.ndarray
+    position: np.ndarray
+    n_downstream: np.ndarray
+    n_inlets: int
+
+    @property
+    def n_nodes(self) -> int:
+        return self.parent.size
+
+    @property
+    def n_terminals(self) -> int:
+        return self.parent.size // 2
+
+    @property
+    def kind(self) -> np.ndarray:
+        return node_kinds(self.n_terminals, self.n_inlets)
+
+    def copy(self) -> "Tree":
+        return Tree(self.parent.copy(), self.children.copy(), self.position.copy(), self.n_downstream.copy(),
+                    self.n_inlets)
+
+
+def node_kinds(n_terminals: int, n_inlets: int) -> np.ndarray:
+    """int8 (2N,) node kinds in the fixed layout."""
+    kind = np.full(2 * n_terminals, KIND_BIFURCATION, dtype=np.int8)
+    kind[:n_inlets] = KIND_INLET
+    kind[n_inlets:n_inlets + n_terminals] = KIND_TERMINAL
+    return kind
+
+
+def children_from_parent(parent: np.ndarray) -> np.ndarray:
+    """(2N, 2) child table from a parent array, children in increasing index order."""
+    children = np.full((parent.size, 2), -1, dtype=np.int64)
+    for node in np.flatnonzero(parent >= 0):
+        p = parent[node]
+        slot = 0 if children[p, 0] < 0 else 1
+        if children[p, slot] >= 0:
+            raise TreeError(f"node {p} has more than two children")
+        children[p, slot] = node
+    return children
+
+
+def count_terminals(parent: np.ndarray, n_terminals: int, n_inlets: int) -> np.ndarray:
+    """Terminals downstream of every node, recounted from ``parent`` alone (path walk)."""
+    counts = np.zeros(parent.size, dtype=np.int64)
+    for t in range(n_inlets, n_inlets + n_terminals):
+        node, steps = t, 0
+        while node >= 0:
+            counts[node] += 1
+            node = parent[node]
+            steps += 1
+            if steps > parent.size:
+                raise TreeError(f"cycle above terminal {t}")
+    return counts
+
+
+def random_terminal_sites(tissue: Tissue, n_terminals: int, state: np.ndarray) -> np.ndarray:
+    """Uniform random points in the tissue: a random tissue voxel, then a uniform offset in it."""
+    voxels = np.flatnonzero(tissue.mask.reshape(-1))
+    u = np.empty((n_terminals, 4))
+    _rng.fill_uniform(state, u)
+    pick = voxels[np.minimum((u[:, 0] * voxels.size).astype(np.int64), voxels.size - 1)]
+    z, y, x = np.unravel_index(pick, tissue.shape)
+    centre = tissue.origin + tissue.voxel_size * np.stack([x, y, z], axis=1)
+    offset = (u[:, 1:] - 0.5) * tissue.voxel_size
+    if tissue.ndim == 2:
+        offset[:, 2] = 0.0
+    return centre + offset
+
+
+def random_tree(tissue: Tissue, n_terminals: int, state: np.ndarray, sites: np.ndarray | None = None) -> Tree:
+    """Random initial tree (SPEC section 2).
+
+    Terminals uniformly at random in the tissue (or at ``sites``), each assigned to a
+    uniformly random inlet (every inlet gets at least one), a random topology per inlet
+    by repeatedly joining two random subtrees, each bifurcation placed at the mean of its
+    children. All randomness comes from ``state`` (advanced in place).
+    """
+    n_inlets = len(tissue.inlets)
+    if n_terminals < max(2, n_inlets):
+        raise TreeError(f"n_terminals must be >= max(2, number of inlets = {n_inlets}), got {n_terminals}")
+    m = 2 * n_terminals
+    parent = np.full(m, -1, dtype=np.int64)
+    position = np.zeros((m, 3), dtype=np.float64)
+    position[:n_inlets] = tissue.inlets
+    terminals = np.arange(n_inlets, n_inlets + n_terminals)
+    position[terminals] = random_terminal_sites(tissue, n_terminals, state) if sites is None else sites
+    # Inlet of each terminal: the first K terminals (in random order) seed one inlet each.
+    order = terminals.copy()
+    for i in range(order.size - 1, 0, -1):  # Fisher-Yates with the run's generator
+        j = _rng.next_below(state, i + 1)
+        order[i], order[j] = order[j], order[i]
+    inlet_of = np.empty(n_terminals, dtype=np.int64)
+    inlet_of[order[:n_inlets] - n_inlets] = np.arange(n_inlets)
+    for t in order[n_inlets:]:
+        inlet_of[t - n_inlets] = _rng.next_below(state, n_inlets)
+    next_bif = n_inlets + n_terminals
+    for k in range(n_inlets):
+        roots = list(terminals[inlet_of == k])
+        while len(roots) > 1:
+            i = _rng.next_below(state, len(roots))
+            a = roots.pop(i)
+            j = _rng.next_below(state, len(roots))
+            b = roots.pop(j)
+            parent[a] = parent[b] = next_bif
+            position[next_bif] = 0.5 * (position[a] + position[b])
+            roots.append(next_bif)
+            next_bif += 1
+        parent[roots[0]] = k
+    children = children_from_parent(parent)
+    return Tree(parent, children, position, count_terminals(parent, n_terminals, n_inlets), n_inlets)
+
+
+def check_tree(tree: Tree, tissue: Tissue | None = None) -> None:
+    """Raise :class:`TreeError` unless every structural invariant holds.
+
+    Inlets have no parent and one child; bifurcations two children; terminals none; the
+    child table mirrors ``parent``; every node reaches an inlet (no cycle); the stored
+    downstream counts equal a recount. With ``tissue``: terminals lie in tissue and every
+    node inside the grid's box (in the plane for a 2-D tissue).
+    """
+    n, k = tree.n_terminals, tree.n_inlets
+    parent, kind = tree.parent, tree.kind
+    if np.any(parent[:k] != -1):
+        raise TreeError("an inlet has a parent")
+    if np.any(parent[k:] < 0) or np.any(parent[k:] >= tree.n_nodes):
+        raise TreeError("a non-inlet node has no valid parent")
+    if np.any(kind[parent[k:]] == KIND_TERMINAL):
+        raise TreeError("a terminal has a child")
+    n_children = np.bincount(parent[k:], minlength=tree.n_nodes)
+    expected = np.where(kind == KIND_INLET, 1, np.where(kind == KIND_BIFURCATION, 2, 0))
+    bad = np.flatnonzero(n_children != expected)
+    if bad.size:
+        raise TreeError(f"node {bad[0]} (kind {kind[bad[0]]}) has {n_children[bad[0]]} children")
+    if not np.array_equal(np.sort(tree.children, axis=1), np.sort(children_from_parent(parent), axis=1)):
+        raise TreeError("child table does not mirror the parent array")
+    counts = count_terminals(parent, n, k)  # raises on a cycle
+    if not np.array_equal(counts, tree.n_downstream):
+        node = np.flatnonzero(counts != tree.n_downstream)[0]
+        raise TreeError(f"n_downstream[{node}] = {tree.n_downstream[node]} but {counts[node]} terminals are below it")
+    if tissue is not None:
+        term = tree.position[k:k + n]
+        if not np.all(tissue.contains(term)):
+            raise TreeError("a terminal lies outside the tissue")
+        lo, hi = tissue.bounds
+        if np.any(tree.position < lo - 1e-12) or np.any(tree.position > hi + 1e-12):
+            raise TreeError("a node lies outside the voxel grid's box")
+
+
+def load_terminal_sites(path: str, tissue: Tissue) -> np.ndarray:
+    """Terminal sites from a CSV of x, y, z in metres (header optional), checked against the tissue."""
+    import pandas as pd
+
+    try:
+        frame = pd.read_csv(path, comment="#")
+        if not {"x", "y", "z"} <= set(frame.columns):
+            frame = pd.read_csv(path, comment="#", header=None)
+            if frame.shape[1] != 3:
+                raise TreeError(f"terminals.path: {path!r} must have columns x, y, z (metres)")
+            frame.columns = ["x", "y", "z"]
+        sites = frame[["x", "y", "z"]].to_numpy(dtype=np.float64)
+    except FileNotFoundError as exc:
+        raise TreeError(f"terminals.path: file {path!r} does not exist") from exc
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise TreeError(f"terminals.path: cannot read {path!r} as x, y, z in metres: {exc}") from exc
+    if len(sites) < 2:
+        raise TreeError(f"terminals.path: {path!r} holds {len(sites)} sites; at least 2 are needed")
+    outside = np.flatnonzero(~tissue.contains(sites))
+    if outside.size:
+        raise TreeError(f"terminals.path: site {outside[0]} at {sites[outside[0]].tolist()} m lies outside the tissue")
+    return sites
