@@ -605,8 +605,9 @@ def swap_nodes(model, state, a, b, temp):
     pb = parent[b]
     if pa == pb:  # siblings: the swap changes nothing
         return ILLEGAL
-    # Mark a's ancestors; b among them, or a among b's, would close a loop.
-    stamp = state.counters[COUNTER_STEP] + 1
+    # Mark a's ancestors; b among them, or a among b's, would close a loop. The stamp is
+    # unique per proposal (also for direct calls within one step), so stale marks never match.
+    stamp = state.counters[COUNTER_SWAP_PROPOSED]
     mark = state.scratch_mark
     x = pa
     while x >= 0:
