@@ -68,7 +68,7 @@ def voxel_pieces(u0: np.ndarray, u1: np.ndarray, shape: tuple[int, int, int]) ->
         if d[a] != 0.0:
             lo, hi = sorted((u0[a], u0[a] + d[a]))
             planes = np.arange(math.ceil(lo - 0.5), math.floor(hi - 0.5) + 1) + 0.5
-            crossings.append((planes - u0[a]) / d[a])
+            crossings.append((planes - u0[a]) * (1.0 / d[a]))  # as the kernel computes it
     t = np.unique(np.clip(np.concatenate(crossings), 0.0, 1.0))
     mid = 0.5 * (t[:-1] + t[1:])
     idx = np.floor(u0 + mid[:, None] * d + 0.5).astype(np.int64)[:, ::-1]
