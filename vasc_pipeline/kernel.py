@@ -405,6 +405,31 @@ def _accept(d_cost, temp, rng):
     return next_double(rng) < math.exp(-d_cost / temp)
 
 
+@jit_inline
+def _early_reject(lower_bound, temp, rng):
+    """Metropolis on a lower bound of ΔC, before the costly terms are evaluated.
+
+    Returns (rejected, u): if the bound is uphill the uniform u is drawn now (the full
+    test would draw it too, since ΔC >= bound > 0) and the move is rejected when even
+    the bound fails; otherwise u = -1 (not drawn). The decision then equals the full
+    test's with the same u, so the random stream is unchanged by the shortcut.
+    """
+    if lower_bound <= 0.0:
+        return False, -1.0
+    u = next_double(rng)
+    return u >= math.exp(-lower_bound / temp), u
+
+
+@jit_inline
+def _accept_with(d_cost, temp, rng, u):
+    """:func:`_accept`, reusing the uniform ``u`` when :func:`_early_reject` drew one."""
+    if d_cost <= 0.0:
+        return True
+    if u < 0.0:
+        u = next_double(rng)
+    return u < math.exp(-d_cost / temp)
+
+
 @jit
 def _translate(model, state, temp, new):
     """Propose moving a random non-inlet node by a uniform random displacement (``new``: scratch (3,))."""
@@ -453,19 +478,19 @@ def translate_node(model, state, i, new, temp):
             if new[a] < model.box_lo[a] or new[a] > model.box_hi[a]:
                 return ILLEGAL
     # The moved node's own segment and (for a bifurcation) its children's change length.
+    # Cheap terms first: the exclusion traversals are skipped when a lower bound of ΔC
+    # (new segments' exclusion taken as 0) already fails Metropolis.
     p = state.parent[i]
     n = state.n_downstream[i]
     len_i = _distance3(new, pos[p])
     d_len = len_i - state.seg_length[i]
     d_vol = tables[T_VOLUME, n] * d_len
     d_pow = tables[T_POWER, n] * d_len
-    d_exc = 0.0
-    exc_i = 0.0
-    if model.exclusion_on:
-        exc_i = segment_exclusion(model, new, pos[p])
-        d_exc = tables[T_EXCLUSION, n] * (exc_i - state.seg_exclusion[i])
+    old_exc = tables[T_EXCLUSION, n] * state.seg_exclusion[i]
     c0 = state.children[i, 0]
     c1 = state.children[i, 1]
+    n0 = 0
+    n1 = 0
     len_c0 = 0.0
     len_c1 = 0.0
     exc_c0 = 0.0
@@ -479,14 +504,26 @@ def translate_node(model, state, i, new, temp):
             len_c1 - state.seg_length[c1])
         d_pow += tables[T_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[T_POWER, n1] * (
             len_c1 - state.seg_length[c1])
-        if model.exclusion_on:
-            exc_c0 = segment_exclusion(model, pos[c0], new)
-            exc_c1 = segment_exclusion(model, pos[c1], new)
-            d_exc += tables[T_EXCLUSION, n0] * (exc_c0 - state.seg_exclusion[c0]) + tables[T_EXCLUSION, n1] * (
-                exc_c1 - state.seg_exclusion[c1])
+        old_exc += tables[T_EXCLUSION, n0] * state.seg_exclusion[c0] + tables[T_EXCLUSION, n1] * state.seg_exclusion[c1]
     d_sup = 0.0
     if is_terminal and model.supply_on:
         d_sup = supply_move_delta(model, state.supply, pos[i], new)
+    u = -1.0
+    if not model.pressure_on:
+        bound = (d_vol + d_pow) - model.w_exclusion * old_exc + model.w_supply * d_sup
+        rejected, u = _early_reject(bound, temp, rng)
+        if rejected:
+            return REJECTED
+    d_exc = 0.0
+    exc_i = 0.0
+    if model.exclusion_on:
+        exc_i = segment_exclusion(model, new, pos[p])
+        d_exc = tables[T_EXCLUSION, n] * exc_i
+        if not is_terminal:
+            exc_c0 = segment_exclusion(model, pos[c0], new)
+            exc_c1 = segment_exclusion(model, pos[c1], new)
+            d_exc += tables[T_EXCLUSION, n0] * exc_c0 + tables[T_EXCLUSION, n1] * exc_c1
+        d_exc -= old_exc
     new_pressure = 0.0
     d_pre = 0.0
     if model.pressure_on:  # tentatively apply: C_p is recomputed in full
@@ -513,7 +550,7 @@ def translate_node(model, state, i, new, temp):
             state.seg_length[c0] = old_len_c0
             state.seg_length[c1] = old_len_c1
     d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + model.w_supply * d_sup
-    if not _accept(d_cost, temp, rng):
+    if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_TERMINAL_ACCEPTED + 2 * cls] += 1
     if is_terminal and model.supply_on:
@@ -662,13 +699,18 @@ def swap_nodes(model, state, a, b, temp):
         new_len_b - state.seg_length[b])
     d_pow += tables[T_POWER, na] * (new_len_a - state.seg_length[a]) + tables[T_POWER, nb] * (
         new_len_b - state.seg_length[b])
+    old_exc = tables[T_EXCLUSION, na] * state.seg_exclusion[a] + tables[T_EXCLUSION, nb] * state.seg_exclusion[b]
+    u = -1.0
+    if not model.pressure_on:  # skip the traversals when even a zero-exclusion bound fails
+        rejected, u = _early_reject((d_vol + d_pow) + model.w_exclusion * (d_exc - old_exc), temp, rng)
+        if rejected:
+            return REJECTED
     new_exc_a = 0.0
     new_exc_b = 0.0
     if model.exclusion_on:
         new_exc_a = segment_exclusion(model, pos[a], pos[pb])
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
-        d_exc += tables[T_EXCLUSION, na] * (new_exc_a - state.seg_exclusion[a]) + tables[T_EXCLUSION, nb] * (
-            new_exc_b - state.seg_exclusion[b])
+        d_exc += (tables[T_EXCLUSION, na] * new_exc_a + tables[T_EXCLUSION, nb] * new_exc_b) - old_exc
     old_len_a = state.seg_length[a]
     old_len_b = state.seg_length[b]
     d_pre = 0.0
@@ -683,7 +725,7 @@ def swap_nodes(model, state, a, b, temp):
         state.seg_length[a] = old_len_a
         state.seg_length[b] = old_len_b
     d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre
-    if not _accept(d_cost, temp, rng):
+    if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_SWAP_ACCEPTED] += 1
     _exchange_parents(state, a, b, lca)
