@@ -15,13 +15,10 @@ from ._jit import jit
 __all__ = ["seed_state", "next_u64", "next_double", "next_below", "fill_uniform"]
 
 _MASK = (1 << 64) - 1
-_U1 = np.uint64(1)
 _U7 = np.uint64(7)
 _U11 = np.uint64(11)
 _U17 = np.uint64(17)
 _U45 = np.uint64(45)
-_U57 = np.uint64(57)
-_U19 = np.uint64(19)
 _U5 = np.uint64(5)
 _U9 = np.uint64(9)
 _TWO_M53 = 1.0 / 9007199254740992.0
