@@ -1,6 +1,6 @@
 """Overhead of the pipeline against calling the engine directly for the same jobs.
 
-    PYTHONPATH=. python benchmarks/pipeline_overhead.py [--jobs 4] [--workers 2] [--steps 4000000]
+    python benchmarks/pipeline_overhead.py [--jobs 4] [--workers 2] [--steps 20000000]
 
 Both sides run the same jobs (a small sphere sweep) with the same parallelism:
 
@@ -37,7 +37,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=4, help="runs in the sweep (seeds)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--n-terminals", type=int, default=48)
-    ap.add_argument("--steps", type=int, default=4_000_000, help="proposed moves per run")
+    ap.add_argument("--steps", type=int, default=20_000_000,
+                    help="proposed moves per run (default: jobs of ~30 s, so fixed start-up costs do not dominate)")
     ap.add_argument("--checkpoint-seconds", type=float, default=30.0)
     args = ap.parse_args()
 
