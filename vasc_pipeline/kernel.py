@@ -225,8 +225,8 @@ def _voxel_coords(model, x, y, z):
 
 
 @jit_inline
-def _range_change(row, lo, hi, sign, write):
-    """C_s change when voxels lo..hi of a row gain ``sign``; branch-free so LLVM vectorises it.
+def _range_change(supply, k, j, lo, hi, sign, write):
+    """C_s change when voxels lo..hi of row (k, j) gain ``sign``; branch-free so LLVM vectorises it.
 
     s(0) = 10, s(b) = (b - 1)^2: s(b + 1) - s(b) = 2b - 1 - 9 [b = 0] and
     s(b - 1) - s(b) = 3 - 2b + 9 [b = 1]; non-tissue voxels hold -1 and contribute 0.
@@ -234,26 +234,26 @@ def _range_change(row, lo, hi, sign, write):
     delta = 0
     if sign > 0:
         for i in range(lo, hi + 1):
-            b = np.int64(row[i])
+            b = np.int64(supply[k, j, i])
             delta += (b >= 0) * ((2 * b - 1) - 9 * (b == 0))
     else:
         for i in range(lo, hi + 1):
-            b = np.int64(row[i])
+            b = np.int64(supply[k, j, i])
             delta += (b >= 0) * ((3 - 2 * b) + 9 * (b == 1))
     if write:
         for i in range(lo, hi + 1):
-            if row[i] >= 0:
-                row[i] += sign
+            if supply[k, j, i] >= 0:
+                supply[k, j, i] += sign
     return delta
 
 
 @jit_inline
-def _row_change(row, lo, hi, other_lo, other_hi, sign, write):
-    """C_s change when voxels lo..hi of a row, except other_lo..other_hi, gain ``sign``."""
+def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
+    """C_s change when voxels lo..hi of row (k, j), except other_lo..other_hi, gain ``sign``."""
     if other_lo > other_hi or other_hi < lo or other_lo > hi:  # nothing to exclude
-        return _range_change(row, lo, hi, sign, write)
-    return (_range_change(row, lo, other_lo - 1, sign, write)
-            + _range_change(row, other_hi + 1, hi, sign, write))
+        return _range_change(supply, k, j, lo, hi, sign, write)
+    return (_range_change(supply, k, j, lo, other_lo - 1, sign, write)
+            + _range_change(supply, k, j, other_hi + 1, hi, sign, write))
 
 
 @jit
@@ -301,11 +301,10 @@ def _sphere_change(model, supply, old, new, write):
                 o_lo, o_hi = _row_interval(ox, (j - oy) * (j - oy), do2, rho2, nx)
             if dn2 <= rho2:
                 n_lo, n_hi = _row_interval(nx_, (j - ny_) * (j - ny_), dn2, rho2, nx)
-            row = supply[k, j]
             if o_lo <= o_hi:
-                delta += _row_change(row, o_lo, o_hi, n_lo, n_hi, -1, write)
+                delta += _row_change(supply, k, j, o_lo, o_hi, n_lo, n_hi, -1, write)
             if n_lo <= n_hi:
-                delta += _row_change(row, n_lo, n_hi, o_lo, o_hi, 1, write)
+                delta += _row_change(supply, k, j, n_lo, n_hi, o_lo, o_hi, 1, write)
     return float(delta)
 
 
