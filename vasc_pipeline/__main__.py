@@ -1,5 +1,8 @@
 """``python -m vasc_pipeline [overrides]``: one run, or a sweep with ``+sweep=NAME``.
 
+A finished sweep is reduced (summary.zarr, figures, trees); ``+stage=reduce
+output_dir=...`` only reduces the complete runs already there.
+
 Thin on purpose (SPEC section 8): Hydra composes the config, and
 :func:`vasc_pipeline.orchestrate.main` (a plain function that tests call directly) does
 the rest and returns the exit status.

@@ -21,6 +21,7 @@ __all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "Term
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
 _PACKAGE_DIR = Path(__file__).resolve().parent
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
+STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
 
 
@@ -98,6 +99,9 @@ class RunConfig:
     # sweep, so it is optional; cluster is always present (cluster=local by default).
     sweep: Optional[SweepConfig] = None
     cluster: ClusterConfig = field(default_factory=lambda: ClusterConfig())
+    # What the command does: "run" the sweep (then reduce it), or only "reduce" the runs
+    # already in output_dir (+stage=reduce). Not part of a run's identity (sweep.py drops it).
+    stage: str = "run"
 
 
 def to_run_config(cfg: Any) -> RunConfig:
@@ -164,6 +168,8 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.tissue.q_required is not None:
         _positive("tissue.q_required", cfg.tissue.q_required)
     _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)
+    if cfg.stage not in STAGES:
+        raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return cfg

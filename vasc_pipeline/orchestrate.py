@@ -41,7 +41,7 @@ from .config import ClusterConfig, ConfigError, RunConfig
 from .store import STATUS_COMPLETE, RUNS_DIR, RunStore, StoreError
 from .sweep import Job, expand
 
-__all__ = ["main", "run_sweep", "plan", "Plan", "output_dir_lock", "OutputDirLocked", "open_client", "check_cluster",
+__all__ = ["main", "run_sweep", "reduce_stage", "plan", "Plan", "output_dir_lock", "OutputDirLocked", "open_client", "check_cluster",
            "check_output_dir", "OutputDirCallback",
            "compile_kernels", "LOCK_NAME", "PROGRESS_TOPIC"]
 
@@ -474,7 +474,7 @@ def _terminal_width() -> int:
 
 
 def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
-              progress_interval: float | None = None) -> dict[str, Any]:
+              progress_interval: float | None = None, reduce: bool = True) -> dict[str, Any]:
     """Run every unfinished job of the sweep (or single run) described by ``cfg``.
 
     Parameters
@@ -487,13 +487,18 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
         Where progress and the end summary go.
     progress_interval : float, optional
         Seconds between progress lines (default 1 on a terminal, 30 otherwise).
+    reduce : bool, default True
+        When every run of the sweep is complete, reduce the output_dir afterwards
+        (:func:`vasc_pipeline.reduce.reduce`: summary.zarr, comparison, figures, trees).
 
     Returns
     -------
     dict
         ``output_dir``, ``runs`` (job summaries of this call, see
         :func:`vasc_pipeline.job.run_job`), ``complete``, ``resumed``, ``skipped`` (run ids),
-        ``failed`` ({run_id: error text}), ``wall_seconds``.
+        ``failed`` ({run_id: error text}), ``wall_seconds``, ``reduction`` (a
+        :class:`vasc_pipeline.reduce.Reduction`, or None when not reduced) and
+        ``reduction_error`` (text, or None).
 
     Raises ConfigError / TissueError / TreeError / OSError (incl. :class:`OutputDirLocked`)
     before any job starts.
@@ -542,7 +547,42 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
             progress.tick(force=True)
     result["wall_seconds"] = time.monotonic() - started
     _print_summary(result, p, stream)
+    result["reduction"], result["reduction_error"] = None, None
+    if reduce and len(set(result["complete"]) | set(result["skipped"])) == len(p.jobs):
+        result["reduction"], result["reduction_error"] = _reduce_after_sweep(p.output_dir, stream)
     return result
+
+
+def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | None]:
+    """Reduce a finished sweep; a failure is reported, never raised: the runs are already stored."""
+    from .reduce import reduce
+
+    try:
+        return reduce(output_dir, stream=stream), None
+    except Exception as exc:
+        error = f"{type(exc).__name__}: {exc}"
+        stream.write(f"vasc_pipeline: reduction FAILED ({error}). Every run is stored; retry with "
+                     f"python -m vasc_pipeline +stage=reduce output_dir={output_dir}\n")
+        stream.flush()
+        return None, error
+
+
+def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
+    """``+stage=reduce``: reduce the complete runs already in ``cfg.output_dir``; returns the exit status."""
+    from .reduce import ReductionError, reduce
+
+    stream = stream or sys.stderr
+    output_dir = Path(cfg.output_dir)
+    if not (output_dir / RUNS_DIR).is_dir():
+        stream.write(f"vasc_pipeline: error: output_dir {str(output_dir)!r} holds no runs/ directory: nothing to "
+                     "reduce. Give the output_dir of a sweep (output_dir=...).\n")
+        return 2
+    try:
+        reduction = reduce(output_dir, stream=stream)
+    except (ReductionError, OSError) as exc:
+        stream.write(f"vasc_pipeline: error: {exc}\n")
+        return 2
+    return 1 if reduction.errors else 0
 
 
 def _wait_some(wait, futures: set, timeout: float) -> tuple[set, set]:
@@ -591,12 +631,16 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
 
     Bad input (ConfigError, TissueError, TreeError, OSError such as an unwritable or locked
     output_dir, StoreError) is reported as one paragraph on stderr with status 2, before any
-    job starts; failed runs give status 1; Ctrl-C gives 130 (rerun to resume).
+    job starts; failed runs give status 1; Ctrl-C gives 130 (rerun to resume). A finished
+    sweep is reduced (status 1 if that fails); ``stage="reduce"`` (``+stage=reduce``) only
+    reduces the runs already in ``output_dir`` (:func:`reduce_stage`).
     """
     from .tissue import TissueError
     from .tree import TreeError
 
     stream = stream or sys.stderr
+    if getattr(cfg, "stage", "run") == "reduce":
+        return reduce_stage(cfg, stream)
     try:
         result = run_sweep(cfg, stream=stream)
     except (ConfigError, TissueError, TreeError, StoreError, OSError) as exc:
@@ -606,4 +650,4 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
         stream.write("\nvasc_pipeline: interrupted. Finished runs are stored; the others resume from their last "
                      "checkpoint when the same command is run again.\n")
         return 130
-    return 1 if result["failed"] else 0
+    return 1 if result["failed"] or result["reduction_error"] else 0

@@ -129,6 +129,7 @@ def expand(cfg: Any) -> list[Job]:
         rid = run_id(tissue, n, m_b, seed, steps)
         config = asdict(run_cfg)
         del config["sweep"], config["cluster"]  # how a run is scheduled is not part of it
+        config.pop("stage", None)
         coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps}
         jobs.append(Job(rid, cell_id(tissue, n, m_b, steps), coords, config,
                         str(run_path(run_cfg.output_dir, rid))))

@@ -1,0 +1,298 @@
+"""The reduction on finished sweeps: best seed per cell, summary.zarr schema and units, Kassab
+values, the comparison table, figures, tree exports, the sweep hook and ``+stage=reduce``.
+
+The sweeps are tiny (16/24 terminals, 5e4 proposals) and run in this process with
+:func:`vasc_pipeline.job.run_job`, which writes the same stores as a Dask sweep.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import xarray as xr
+
+from vasc_pipeline import config, job, morphometry, orchestrate, reduce as reduce_mod, store, sweep
+from vasc_pipeline.reference import kassab_csv_path
+
+REPO = Path(__file__).resolve().parents[1]
+GRID = ["+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3,6413.0]", "sweep.seeds=[0,1,2]",
+        "anneal.steps=50000", "anneal.trace_every=10000", "cluster.dashboard_address=null"]
+GROUPS = ("morphometry", "asymmetry", "costs", "traces", "kassab", "comparison")
+
+
+def run_all(out: Path, *overrides: str) -> list[sweep.Job]:
+    jobs = sweep.expand(config.compose([*overrides, f"output_dir={out}"]))
+    for j in jobs:
+        job.run_job(j)
+    return jobs
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep")
+    jobs = run_all(out, *GRID)
+    stream = io.StringIO()
+    result = reduce_mod.reduce(out, stream=stream)
+    return out, jobs, result, stream.getvalue()
+
+
+@pytest.fixture(scope="module")
+def summary(swept):
+    return xr.open_datatree(swept[0] / "summary.zarr", engine="zarr")
+
+
+def test_lowest_cost_seed_is_chosen_in_every_cell(swept, summary):
+    out, jobs, result, _ = swept
+    costs: dict[tuple, dict[int, float]] = {}
+    for j in jobs:
+        total = store.RunStore.open(j.store, mode="r").attrs["cost"]["total"]
+        costs.setdefault((j.coords["n_terminals"], j.coords["m_b"]), {})[j.coords["seed"]] = total
+    morph, c = summary["morphometry"], summary["costs"]
+    assert len(costs) == 4 and result.cell_dims == ["n_terminals", "m_b"]
+    for (n, m_b), by_seed in costs.items():
+        best_seed = min(by_seed, key=lambda s: (by_seed[s], s))
+        point = {"n_terminals": n, "m_b": m_b}
+        assert int(morph["best_seed"].sel(point)) == best_seed
+        assert str(morph["best_run_id"].sel(point).values) == sweep.run_id("sphere", n, m_b, best_seed)
+        assert float(morph["best_cost"].sel(point)) == by_seed[best_seed]
+        assert int(morph["n_seeds"].sel(point)) == 3
+        # every seed's final cost is stored, and is_best marks the minimum
+        stored = c["cost_total"].sel(point)
+        assert [float(stored.sel(seed=s)) for s in sorted(by_seed)] == [by_seed[s] for s in sorted(by_seed)]
+        assert c["is_best"].sel(point).values.tolist() == [int(s == best_seed) for s in sorted(by_seed)]
+    # the seeds really differ, so choosing is not trivial
+    assert any(len(set(v.values())) > 1 for v in costs.values())
+
+
+def test_morphometry_is_that_of_the_best_tree(swept, summary):
+    out, _, result, _ = swept
+    morph = summary["morphometry"].to_dataset()
+    for key, run in result.best.items():
+        tree = store.RunStore.open(run.path, mode="r").read_tree()
+        direct = morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
+        point = dict(zip(result.cell_dims, key))
+        for name in ("element_diameter_mean", "element_length_se", "element_count", "segment_diameter_mean"):
+            stored = morph[name].sel(point).sel(order=direct.order)
+            np.testing.assert_array_equal(stored.values, direct[name].transpose("scheme", "order").values)
+        # orders of trees of different N are aligned on the shifted order: the top is 11
+        counts = morph["element_count"].sel(point).sel(scheme="diameter_defined")
+        assert int(counts.order[counts > 0].max()) == 11
+        assert int(counts.sel(order=11)) >= 1
+    # cells of different N share one order axis: absent orders hold count 0 and NaN statistics
+    counts = morph["element_count"]
+    assert (counts == 0).any() and morph.order.values.tolist() == list(range(int(morph.order.min()), 12))
+    assert morph["element_diameter_mean"].where(counts == 0).isnull().all()
+    assert morph["element_diameter_mean"].where(counts > 0).notnull().sum() == (counts > 0).sum()
+
+
+def test_every_group_opens_with_open_zarr_and_has_units_and_long_names(swept):
+    out = swept[0]
+    tree = xr.open_datatree(out / "summary.zarr", engine="zarr")
+    assert set(GROUPS) <= set(tree.children)
+    assert tree.attrs["cell_dims"] == ["n_terminals", "m_b"] and tree.attrs["n_runs"] == 12
+    expected_dims = {
+        "morphometry": {"n_terminals": 2, "m_b": 2, "scheme": 2},
+        "asymmetry": {"n_terminals": 2, "m_b": 2, "scheme": 2},
+        "costs": {"n_terminals": 2, "m_b": 2, "seed": 3},
+        "traces": {"n_terminals": 2, "m_b": 2, "seed": 3, "record": 6},
+        "kassab": {"artery": 3, "level": 2, "order": 11},
+        "comparison": {"n_terminals": 2, "m_b": 2, "artery": 3},
+    }
+    for group in GROUPS:
+        ds = xr.open_zarr(out / "summary.zarr", group=group)
+        for dim, size in expected_dims[group].items():
+            assert ds.sizes[dim] == size, (group, dim)
+        for name, var in ds.variables.items():
+            assert "long_name" in var.attrs, (group, name)
+            if var.dtype.kind in "fiu":
+                assert "units" in var.attrs, (group, name)
+    morph = xr.open_zarr(out / "summary.zarr", group="morphometry")
+    assert morph["element_diameter_mean"].dims == ("n_terminals", "m_b", "scheme", "order")
+    assert morph["element_diameter_mean"].attrs["units"] == "m"
+    assert morph["m_b"].attrs["units"] == "W m-3"
+    assert morph["order"].values.max() == 11
+    assert str(morph["tissue"].values) == "sphere"
+    assert xr.open_zarr(out / "summary.zarr", group="costs")["cost_total"].attrs["units"] == "W"
+
+
+def test_traces_are_the_stored_traces_of_every_seed(swept, summary):
+    traces = summary["traces"].to_dataset()
+    for j in swept[1]:
+        stored = store.RunStore.open(j.store, mode="r").read_trace()
+        t = traces.sel(n_terminals=j.coords["n_terminals"], m_b=j.coords["m_b"], seed=j.coords["seed"])
+        k = int(t["trace_length"])
+        assert k == len(stored["step"]) == 6  # step 0 and 5 blocks of 1e4
+        np.testing.assert_array_equal(t["step"].values[:k], stored["step"])
+        np.testing.assert_array_equal(t["total"].values[:k], stored["total"])
+
+
+def test_stored_kassab_values_equal_the_csv(summary):
+    text = kassab_csv_path().read_text()
+    csv = pd.read_csv(io.StringIO(text), skiprows=1)
+    kassab = summary["kassab"].to_dataset()
+    assert len(csv) > 50
+    for row in csv.itertuples():
+        at = kassab.sel(artery=row.artery, level=row.level, order=row.order)
+        assert float(at.D_mean) == pytest.approx(row.D_mean_um * 1e-6, rel=1e-12)
+        assert float(at.L_mean) == pytest.approx(row.L_mean_mm * 1e-3, rel=1e-12)
+        assert int(at.D_n) == row.D_n
+    assert "Kassab" in kassab.attrs["source"]
+
+
+def test_comparison_table_stored_printed_and_csv(swept, summary):
+    out, _, result, printed = swept
+    comp = summary["comparison"].to_dataset()
+    morph = summary["morphometry"].to_dataset()
+    kassab = summary["kassab"].to_dataset().sel(level="element")
+    point = {"n_terminals": 24, "m_b": 641.3}
+    model_d = morph["element_diameter_mean"].sel(point).sel(scheme="diameter_defined")
+    model_l = morph["element_length_mean"].sel(point).sel(scheme="diameter_defined")
+    for artery in ("RCA", "LAD", "LCX"):
+        c = comp.sel(point).sel(artery=artery)
+        both = (morph["element_count"].sel(point).sel(scheme="diameter_defined") > 0) & \
+            (kassab.D_n.sel(artery=artery) > 0).reindex(order=model_d.order, fill_value=False)
+        orders = model_d.order[both].values
+        assert orders.size >= 2
+        ratio_d = np.log10(model_d.sel(order=orders).values / kassab.D_mean.sel(artery=artery, order=orders).values)
+        ratio_l = np.log10(model_l.sel(order=orders).values / kassab.L_mean.sel(artery=artery, order=orders).values)
+        np.testing.assert_allclose(c.diameter_log10_ratio.sel(order=orders), ratio_d, rtol=1e-12)
+        assert float(c.mean_abs_log10_ratio_diameter) == pytest.approx(np.abs(ratio_d).mean(), rel=1e-12)
+        assert float(c.mean_abs_log10_ratio_length) == pytest.approx(np.abs(ratio_l).mean(), rel=1e-12)
+        assert int(c.n_orders_compared) == orders.size
+    # the CSV holds the same numbers
+    csv = pd.read_csv(out / "comparison.csv")
+    row = csv[(csv.n_terminals == 24) & (csv.m_b == 641.3) & (csv.artery == "LAD") & (csv.order == 11)]
+    assert len(row) == 1
+    assert row.model_diameter_m.iloc[0] == pytest.approx(float(model_d.sel(order=11)), rel=1e-5)
+    assert row.run_id.iloc[0] == str(morph["best_run_id"].sel(point).values)
+    summary_csv = pd.read_csv(out / "comparison_summary.csv")
+    assert len(summary_csv) == 4 * 3  # cells x arteries
+    # printed: one block per cell with the mean |log10 ratio| line
+    assert printed.count("mean |log10 model/Kassab|") == 4
+    assert str(morph["best_run_id"].sel(point).values) in printed
+
+
+def _png_is_a_real_figure(path: Path) -> None:
+    import matplotlib.image as mpimg
+
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", path
+    assert path.stat().st_size > 20_000, path
+    img = mpimg.imread(path)[..., :3]
+    assert img.shape[0] > 400 and img.shape[1] > 600, (path, img.shape)
+    ink = (img < 0.9).any(axis=-1).mean()  # fraction of pixels that are not (near) white
+    assert 0.01 < ink < 0.9, (path, ink)
+    sample = (img[::3, ::3] * 255).astype(np.uint8).reshape(-1, 3)
+    assert len(np.unique(sample, axis=0)) > 20, path  # colours and grey levels, not one tone
+
+
+def test_figures_exist_and_are_not_blank(swept):
+    out, _, result, _ = swept
+    assert not result.errors
+    names = {p.name for p in result.figures}
+    expected = {"morphometry_vs_kassab.png", "asymmetry.png", "mb_effect.png", "cost_traces.png"}
+    expected |= {f"tree_{r.run_id}.png" for r in result.best.values()}
+    assert names == expected  # no steps axis: no convergence figure
+    for p in result.figures:
+        assert p.parent == out / "figures"
+        _png_is_a_real_figure(p)
+
+
+def test_best_trees_are_exported_as_vtp_and_csv(swept):
+    out, _, result, _ = swept
+    assert len(result.trees) == 2 * len(result.best)
+    for run in result.best.values():
+        tree = store.RunStore.open(run.path, mode="r").read_tree()
+        n_nodes, n_inlets = tree["parent"].size, int((tree["parent"] < 0).sum())
+        root = ET.parse(out / "trees" / f"{run.run_id}.vtp").getroot()
+        assert root.get("type") == "PolyData"
+        piece = root.find("PolyData/Piece")
+        assert int(piece.get("NumberOfPoints")) == n_nodes == 2 * run.n_terminals
+        assert int(piece.get("NumberOfLines")) == n_nodes - n_inlets
+        cell = {a.get("Name"): np.array(a.text.split(), dtype=float) for a in piece.find("CellData")}
+        assert set(cell) >= {"radius", "flow", "order"}
+        seg = np.flatnonzero(tree["parent"] >= 0)
+        np.testing.assert_array_equal(cell["radius"], tree["radius"][seg])
+        assert cell["order"].max() == 11
+        table = pd.read_csv(out / "trees" / f"{run.run_id}.csv")
+        assert len(table) == n_nodes and table.radius_m.notna().sum() == n_nodes - n_inlets
+
+
+def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_path):
+    run_all(tmp_path, "tissue=plane2d", "+sweep=convergence", "sweep.n_terminals=[16]", "sweep.seeds=[0,1]",
+            "sweep.steps=[10000,30000]", "anneal.trace_every=10000", "cluster.dashboard_address=null")
+    result = reduce_mod.reduce(tmp_path, stream=io.StringIO())
+    assert result.cell_dims == ["n_terminals", "m_b", "steps"]
+    costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
+    assert costs.sizes["steps"] == 2 and costs.sizes["seed"] == 2
+    assert costs.steps_done.sel(steps=30000).values.ravel().tolist() == [30000, 30000]
+    conv = tmp_path / "figures" / "convergence.png"
+    assert conv in result.figures
+    _png_is_a_real_figure(conv)
+    assert not (tmp_path / "figures" / "mb_effect.png").exists()  # a single m_b
+
+
+def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):
+    with pytest.raises(reduce_mod.ReductionError, match="no complete run"):
+        reduce_mod.reduce(tmp_path)
+    (j,) = run_all(tmp_path, *GRID[:1], "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0]",
+                   "anneal.steps=20000", "anneal.trace_every=10000")
+    running = store.run_path(tmp_path, "sphere-N16-mb641.3-s9")
+    store.RunStore.create(running, run_id="sphere-N16-mb641.3-s9", seed=9, config=j.config,
+                          coords={**j.coords, "seed": 9}, total_steps=20000)
+    result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    assert list(result.skipped) == [str(running)] and "running" in result.skipped[str(running)]
+    costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
+    assert costs.seed.values.tolist() == [0]
+    # a second reduction replaces the summary in place
+    reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    assert sorted(p.name for p in tmp_path.iterdir() if "summary.zarr" in p.name) == ["summary.zarr"]
+
+
+def test_sweep_reduces_at_the_end_and_a_failed_reduction_loses_no_run(tmp_path, monkeypatch):
+    from distributed import Client, LocalCluster
+
+    cfg = config.compose([*GRID, "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
+                          "anneal.steps=20000", f"output_dir={tmp_path}"])
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("figure backend exploded")
+
+    monkeypatch.setattr(reduce_mod, "reduce", broken)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, \
+            Client(cl) as client:
+        stream = io.StringIO()
+        result = orchestrate.run_sweep(cfg, client=client, stream=stream)
+    assert sorted(result["complete"]) == [j.run_id for j in sweep.expand(cfg)]
+    assert result["reduction"] is None and "figure backend exploded" in result["reduction_error"]
+    assert "+stage=reduce" in stream.getvalue()
+    assert not (tmp_path / "summary.zarr").exists()
+    monkeypatch.undo()
+    # rerun: every run is complete (none re-run), and the reduction now succeeds
+    result = orchestrate.run_sweep(cfg, stream=io.StringIO())
+    assert result["complete"] == [] and len(result["skipped"]) == 2
+    assert result["reduction_error"] is None and result["reduction"].summary_path == tmp_path / "summary.zarr"
+    assert xr.open_zarr(tmp_path / "summary.zarr", group="morphometry")["n_seeds"].values.tolist() == [[2]]
+
+
+def test_stage_reduce_on_the_command_line(swept, tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    out = swept[0]
+    before = (out / "runs").stat().st_mtime_ns
+    proc = subprocess.run([sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={out}"], env=env,
+                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "mean |log10 model/Kassab|" in proc.stdout + proc.stderr
+    assert (out / "runs").stat().st_mtime_ns == before  # no run was touched
+    assert xr.open_datatree(out / "summary.zarr", engine="zarr").attrs["n_runs"] == 12
+    # nothing to reduce: a clear error and status 2
+    proc = subprocess.run([sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={tmp_path / 'x'}"],
+                          env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "nothing to reduce" in proc.stderr
