@@ -332,6 +332,15 @@ def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path |
     return _save(fig, path)
 
 
+def _sci(value: float) -> str:
+    """1e5 -> '$10^{5}$', 3e5 -> '$3{\\times}10^{5}$' (tick labels)."""
+    exp = int(math.floor(math.log10(value)))
+    mant = value / 10 ** exp
+    if abs(mant - 1) < 1e-9:
+        return f"$10^{{{exp}}}$"
+    return f"${mant:.3g}{{\\times}}10^{{{exp}}}$"
+
+
 def plot_convergence(summary: xr.DataTree, path) -> Path | None:
     """Mean final cost ± standard error over seeds against the number of steps (the paper's appendix)."""
     costs = summary["costs"].to_dataset()
@@ -341,7 +350,7 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
     others = [d for d in dims if d != "steps"]
     groups = _cells(costs, others) if others else [{}]
     fig, axes = plt.subplots(1, 2, figsize=(8.2, 3.4))
-    colors = _colors(len(groups))
+    colors = _colors(len(groups), "tab10" if len(groups) <= 10 else "viridis")  # categories, not a scale
     steps = costs.steps.values.astype(float)
     panels = ((costs["cost_total"], f"final annealed total cost C [{costs['cost_total'].attrs.get('units', '')}]"),
               (costs["cost_volume"] + costs["cost_power"], "final C$_v$ + C$_w$ [W]"))
@@ -361,16 +370,19 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
             ax.errorbar(steps[ok], mean.values[ok], yerr=np.nan_to_num(se.values[ok]), color=c, marker="o",
                         markersize=4, capsize=2.5, linewidth=1.2, label=f"{label} (n = {int(n.max())} seeds)")
         ax.set_xscale("log")
-        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # crowded 2x10^4 3x10^4 ... labels
+        # ticks at the sweep's step counts (minor log labels crowd, major ones may be absent)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xticks(steps, [_sci(v) for v in steps])
         ax.set_xlabel("proposed moves per run")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
     if not drawn:
         plt.close(fig)
         return None
-    axes[0].legend(loc="upper right")
     fig.suptitle("Convergence: mean final cost ± standard error over seeds", fontsize=9)
     fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(2, len(labels)))
     return _save(fig, path)
 
 
