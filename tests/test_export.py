@@ -103,3 +103,17 @@ def test_export_run_of_a_complete_store_and_refusal_of_a_running_one(tmp_path):
     physics = store.RunStore.open(j.store, mode="r").attrs["physics"]
     root = np.flatnonzero(tree["parent"] == 0)[0]
     assert cell["flow"][list(cell["node"]).index(root)] == pytest.approx(physics["total_flow"], rel=1e-12)
+
+
+def test_vtk_reads_the_vtp_when_vtk_is_installed(tmp_path):
+    # VTK itself is not a dependency (a 100 MB wheel); where it is installed, its reader is the judge.
+    vtk = pytest.importorskip("vtk")
+    vtp, _ = export_tree(tmp_path, "t", PARENT, POSITION, RADIUS, KIND, total_flow=Q0)
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(vtp))
+    reader.Update()
+    poly = reader.GetOutput()
+    assert reader.GetErrorCode() == 0
+    assert poly.GetNumberOfPoints() == 4 and poly.GetNumberOfLines() == 3
+    assert poly.GetCellData().GetArray("radius").GetValue(2) == RADIUS[3]
+    assert poly.GetCellData().GetArray("flow").GetValue(2) == pytest.approx(Q0, rel=1e-15)
