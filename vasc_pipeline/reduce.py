@@ -549,7 +549,7 @@ def format_comparison(summary: xr.DataTree) -> str:
         c = comp.sel(point)
         cost = float(morph["best_cost"].sel(point))
         lines.append("")
-        lines.append(f"{run_id} (lowest of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.6g})")
+        lines.append(f"{run_id} (best of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.6g})")
         head = (f"{'order':>5} {'D model':>7} " + " ".join(f"{'D ' + a:>7}" for a in ARTERIES) + "   "
                 f"{'L model':>7} " + " ".join(f"{'L ' + a:>7}" for a in ARTERIES) + f" {'n model':>7}")
         lines.append(head)
