@@ -1,0 +1,550 @@
+"""Optimal bifurcation positions for a fixed topology, and the polish of an annealed state.
+
+For a fixed topology the radii and flows are fixed (they depend on the downstream terminal
+counts only), so the vascular cost is a weighted sum of segment lengths,
+
+    C_v + C_w = sum_i w(n_i) L_i,   w(n) = volume[n] + power[n]   [W m^-1],
+
+a weighted Steiner (Fermat-Weber) problem in the free (bifurcation) positions with the
+inlets and terminals fixed. Each term is a norm of an affine function of the positions, so
+the cost is convex (the paper's appendix); it is smooth except where a segment has zero
+length, and such degenerate optima (a bifurcation collapsed onto its parent, a child or a
+terminal) are common.
+
+:func:`optimal_bifurcations` finds the minimiser in three stages: a few Weiszfeld-type
+iterations (Smith's global form: every iteration solves the weighted Laplacian system of
+all bifurcations at once; a majorise-minimise step, so it is a safe start from any
+geometry), then Newton's method on the smooth problem in which the zero-length segments
+are contracted (nodes joined by them move as one "cluster"), and an optimality check of
+every contracted segment: a segment may stay at zero length only while the net pull of
+the rest of the tree on the side that would move is no larger than its weight (the
+subgradient condition). Violated segments are reopened and Newton resumes; segments that
+Newton drives to zero length are contracted. The Newton systems are tree-structured and
+are factorised in children-first order, which creates no fill-in, so each is O(N).
+
+:func:`polish` applies the optimum to an annealing state where the total cost, every active
+term included, does not rise. :func:`best_topology` enumerates every topology of a small
+fixed-terminal instance for the global optimum that tests and benchmarks compare against.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from . import kernel
+from .physics import Physics, cost_tables
+from .tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
+
+__all__ = ["BifurcationOptimum", "vascular_weights", "vascular_cost", "optimal_bifurcations", "polish",
+           "topologies", "best_topology"]
+
+
+@dataclass
+class BifurcationOptimum:
+    """Result of :func:`optimal_bifurcations`.
+
+    Attributes
+    ----------
+    position : float64 (2N, 3)
+        Node positions [m]: inlets and terminals as given, bifurcations at the optimum.
+    cost : float
+        Vascular cost sum_i w_i L_i at ``position`` [W].
+    collapsed : bool (2N,)
+        Segments of zero length at the optimum (False at inlets).
+    converged : bool
+        Newton converged and every zero-length segment passed the optimality check.
+    iterations : int
+        Weiszfeld plus Newton iterations.
+    """
+
+    position: np.ndarray
+    cost: float
+    collapsed: np.ndarray
+    converged: bool
+    iterations: int
+
+
+def vascular_weights(tree: Tree, physics: Physics) -> np.ndarray:
+    """float64 (2N,): w = volume + power cost per unit length of each node's segment [W m^-1], 0 at inlets."""
+    tables = cost_tables(physics)
+    w = tables.volume[tree.n_downstream] + tables.power[tree.n_downstream]
+    w[tree.parent < 0] = 0.0
+    return w
+
+
+def vascular_cost(position: np.ndarray, parent: np.ndarray, weights: np.ndarray) -> float:
+    """sum_i w_i |x_i - x_parent(i)| over segments [W]."""
+    seg = parent >= 0
+    return float(np.sum(weights[seg] * np.linalg.norm(position[seg] - position[parent[seg]], axis=1)))
+
+
+# --------------------------------------------------------------------------------------
+# Tree bookkeeping
+
+
+def _levels(children: np.ndarray, roots: np.ndarray) -> list[np.ndarray]:
+    """Nodes by depth below the roots (level 0 = roots)."""
+    levels = []
+    frontier = roots
+    while frontier.size:
+        levels.append(frontier)
+        ch = children[frontier].ravel()
+        frontier = ch[ch >= 0]
+    return levels
+
+
+class _Contraction:
+    """Clusters of nodes joined by zero-length ("collapsed") segments.
+
+    A cluster is a connected subtree; its top node (the member whose own segment is not
+    collapsed) represents it. A cluster holding an inlet or terminal is fixed.
+    """
+
+    def __init__(self, parent, levels, depth, fixed, collapsed):
+        self.collapsed = collapsed
+        self.fixed_node = fixed
+        top = np.arange(parent.size)
+        for lev in levels[1:]:  # parents before children
+            top[lev] = np.where(collapsed[lev], top[parent[lev]], lev)
+        self.top = top
+        n_fixed = np.bincount(top, weights=fixed, minlength=parent.size)
+        self.n_fixed = n_fixed
+        tops = np.flatnonzero(top == np.arange(parent.size))
+        free_tops = tops[n_fixed[tops] == 0]
+        # Children-first order (deepest first): eliminating a cluster whose other
+        # neighbours are already gone creates no fill-in in the tree-structured systems.
+        self.free = free_tops[np.argsort(-depth[free_tops], kind="stable")]
+        self.var = np.full(parent.size, -1, dtype=np.int64)
+        self.var[self.free] = np.arange(self.free.size)
+        # External segments: not collapsed; they join cluster a = i and b = top[parent[i]].
+        seg = np.flatnonzero((parent >= 0) & ~collapsed)
+        self.seg = seg
+        self.a = seg
+        self.b = top[parent[seg]]
+
+
+def _spread(x: np.ndarray, top: np.ndarray) -> None:
+    """Every node takes its cluster's (top node's) position."""
+    x[:] = x[top]
+
+
+# --------------------------------------------------------------------------------------
+# Smooth objective of the contracted problem
+
+
+def _objective(x, con, w):
+    d = x[con.a] - x[con.b]
+    return float(np.sum(w[con.seg] * np.sqrt(np.einsum("ij,ij->i", d, d))))
+
+
+def _gradient_hessian(x, con, w, dim, with_hessian=True):
+    """Gradient (n_free * dim,) and sparse Hessian of the contracted objective."""
+    d = x[con.a] - x[con.b]
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    ws = w[con.seg]
+    u = d / length[:, None]
+    va, vb = con.var[con.a], con.var[con.b]
+    nf = con.free.size
+    g = np.zeros((nf, dim))
+    fa, fb = va >= 0, vb >= 0
+    np.add.at(g, va[fa], ws[fa, None] * u[fa])
+    np.add.at(g, vb[fb], -ws[fb, None] * u[fb])
+    if not with_hessian:
+        return g.ravel(), None
+    # Per segment block h = w / L (I - u u^T); +h on both diagonal blocks, -h off-diagonal.
+    h = (ws / length)[:, None, None] * (np.eye(dim)[None] - u[:, :, None] * u[:, None, :])
+    ii, jj = np.meshgrid(np.arange(dim), np.arange(dim), indexing="ij")
+    rows, cols, vals = [], [], []
+
+    def block(vr, vc, hs, sign):
+        rows.append((vr[:, None, None] * dim + ii[None]).ravel())
+        cols.append((vc[:, None, None] * dim + jj[None]).ravel())
+        vals.append((sign * hs).ravel())
+
+    block(va[fa], va[fa], h[fa], 1.0)
+    block(vb[fb], vb[fb], h[fb], 1.0)
+    both = fa & fb
+    block(va[both], vb[both], h[both], -1.0)
+    block(vb[both], va[both], h[both], -1.0)
+    n = nf * dim
+    hess = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    return g.ravel(), hess
+
+
+def _solve_spd(hess, rhs):
+    """Solve a tree-structured SPD system in its given (children-first) order: no fill-in."""
+    n = hess.shape[0]
+    diag = hess.diagonal()
+    # A tiny ridge guards the exactly singular cases (all segments at a node collinear).
+    ridge = 1e-13 * float(np.max(diag)) if n else 0.0
+    a = (hess + sp.diags(np.full(n, ridge))).tocsc()
+    lu = spla.splu(a, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    return lu.solve(rhs)
+
+
+# --------------------------------------------------------------------------------------
+# Stages
+
+
+def _weiszfeld(x, parent, w, free, levels, depth, scale, iterations):
+    """Smith's global Weiszfeld iteration: solve sum_j w_ij / L_ij (x_i - x_j) = 0 for all free i."""
+    m = parent.size
+    var = np.full(m, -1, dtype=np.int64)
+    order = np.flatnonzero(free)
+    order = order[np.argsort(-depth[order], kind="stable")]
+    var[order] = np.arange(order.size)
+    seg = np.flatnonzero(parent >= 0)
+    i, j = seg, parent[seg]
+    vi, vj = var[i], var[j]
+    floor = 1e-14 * scale
+    cost = np.inf
+    for it in range(iterations):
+        length = np.linalg.norm(x[i] - x[j], axis=1)
+        new_cost = float(np.sum(w[seg] * length))
+        if new_cost > cost * (1.0 - 1e-4):  # slow (linear) from here on: Newton takes over
+            return x, it
+        cost = new_cost
+        a = w[seg] / np.maximum(length, floor)
+        fi, fj = vi >= 0, vj >= 0
+        both = fi & fj
+        n = order.size
+        diag = np.bincount(vi[fi], a[fi], n) + np.bincount(vj[fj], a[fj], n)
+        lap = sp.csc_matrix((np.concatenate([diag, -a[both], -a[both]]),
+                             (np.concatenate([np.arange(n), vi[both], vj[both]]),
+                              np.concatenate([np.arange(n), vj[both], vi[both]]))), shape=(n, n))
+        rhs = np.zeros((n, x.shape[1]))
+        np.add.at(rhs, vi[fi & ~fj], a[fi & ~fj, None] * x[j[fi & ~fj]])
+        np.add.at(rhs, vj[fj & ~fi], a[fj & ~fi, None] * x[i[fj & ~fi]])
+        lu = spla.splu(lap, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        x[order] = lu.solve(rhs)
+    return x, iterations
+
+
+def _newton(x, con, w, dim, scale, collapse_tol, max_iter):
+    """Damped Newton on the contracted objective. Returns (x, iterations, newly collapsed segments)."""
+    f = _objective(x, con, w)
+    for it in range(max_iter):
+        if con.free.size == 0:
+            return x, it, None
+        g, hess = _gradient_hessian(x, con, w, dim)
+        step = _solve_spd(hess, -g)
+        slope = float(g @ step)
+        if -slope <= 1e-15 * f:  # Newton decrement: the remaining decrease is below rounding
+            return x, it, None
+        step = step.reshape(-1, dim)
+        t = 1.0
+        while True:
+            trial = x.copy()
+            trial[con.free] += t * step
+            f_trial = _objective(trial, con, w)
+            if f_trial <= f + 1e-4 * t * slope:
+                break
+            t *= 0.5
+            if t < 1e-12:  # no decrease representable: converged to rounding
+                return x, it, None
+        x, f = trial, f_trial
+        length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
+        # Only segments touching a free cluster: two fixed nodes may never merge.
+        short = (length < collapse_tol * scale) & ((con.var[con.a] >= 0) | (con.var[con.b] >= 0))
+        if np.any(short):
+            return x, it + 1, con.seg[short]
+    return x, max_iter, None
+
+
+def _side_forces(x, parent, w, levels, con):
+    """Net external pull on the movable side of every collapsed segment, and its weight.
+
+    For a collapsed segment i, the side that may split off is the part of its cluster
+    that holds no fixed node. Splitting that side off by a small distance along the pull
+    lowers the cost iff |pull| > w_i.
+    """
+    m = parent.size
+    dim = x.shape[1]
+    ext = np.zeros((m, dim))
+    d = x[con.b] - x[con.a]
+    length = np.linalg.norm(d, axis=1)
+    pull = w[con.seg, None] * d / length[:, None]
+    np.add.at(ext, con.a, pull)
+    np.add.at(ext, parent[con.seg], -pull)
+    below = ext.copy()
+    has_fixed = con.fixed_node.astype(np.float64)
+    for lev in levels[:0:-1]:  # children first
+        c = lev[con.collapsed[lev]]
+        np.add.at(below, parent[c], below[c])
+        np.add.at(has_fixed, parent[c], has_fixed[c])
+    idx = np.flatnonzero(con.collapsed)
+    total = below[con.top[idx]]
+    force = np.where((has_fixed[idx] > 0)[:, None], total - below[idx], below[idx])
+    return idx, force, has_fixed[idx] > 0
+
+
+def optimal_bifurcations(tree: Tree, weights: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None = None, *,
+                         collapse_tol: float = 1e-10, max_newton: int = 400, max_rounds: int = 200
+                         ) -> BifurcationOptimum:
+    """Bifurcation positions minimising sum_i w_i L_i for the tree's fixed topology.
+
+    Parameters
+    ----------
+    tree : Tree
+        Topology and current positions [m]; inlets and terminals stay where they are, the
+        current bifurcation positions are the starting point.
+    weights : float64 (2N,)
+        Cost per unit length of each node's segment [W m^-1] (see :func:`vascular_weights`).
+    bounds : (lo, hi) float64 (3,), optional
+        The grid's box [m]. The optimum lies in the convex hull of the fixed nodes, so this
+        only clips rounding; a 2-D tissue's plane (lo[2] == hi[2]) is kept exactly.
+    collapse_tol : float
+        Segments shorter than this times the extent of the fixed nodes are contracted
+        (then kept only if the optimality check passes).
+
+    Returns
+    -------
+    BifurcationOptimum
+
+    Examples
+    --------
+    >>> res = optimal_bifurcations(tree, vascular_weights(tree, physics), tissue.bounds)  # doctest: +SKIP
+    >>> res.cost <= vascular_cost(tree.position, tree.parent, vascular_weights(tree, physics))  # doctest: +SKIP
+    True
+    """
+    parent = tree.parent
+    w = np.asarray(weights, dtype=np.float64)
+    m = parent.size
+    fixed = tree.kind != KIND_BIFURCATION
+    free = ~fixed
+    children = tree.children
+    levels = _levels(children, np.flatnonzero(parent < 0))
+    depth = np.zeros(m, dtype=np.int64)
+    for d, lev in enumerate(levels):
+        depth[lev] = d
+    # Work in the affine hull of the fixed nodes: the optimum lies in their convex hull,
+    # and dropping the flat directions (a 2-D tissue's z) keeps the Newton systems regular.
+    p_fixed = tree.position[fixed]
+    centre = p_fixed.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p_fixed - centre, full_matrices=False)
+    scale = float(np.max(np.linalg.norm(p_fixed - centre, axis=1))) or 1.0
+    basis = vt[sv > 1e-12 * max(float(sv[0]), 1e-300)]
+    dim = basis.shape[0]
+    x = (tree.position - centre) @ basis.T
+    iterations = 0
+    converged = True
+    collapsed = np.zeros(m, dtype=bool)
+    if dim > 0 and np.any(free):
+        x, iterations = _weiszfeld(x, parent, w, free, levels, depth, scale, 30)
+        seg = parent >= 0
+        length = np.zeros(m)
+        length[seg] = np.linalg.norm(x[seg] - x[parent[seg]], axis=1)
+        collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
+        converged = False
+        for _ in range(max_rounds):
+            con = _Contraction(parent, levels, depth, fixed, collapsed)
+            _spread(x, con.top)
+            x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton)
+            _spread(x, con.top)  # Newton moves only the clusters' top nodes
+            iterations += its
+            if short is not None:
+                candidate = collapsed.copy()
+                candidate[short] = True
+                collapsed = _admissible(candidate, parent, levels, depth, fixed)
+                continue
+            idx, force, _ = _side_forces(x, parent, w, levels, con)
+            if idx.size == 0:
+                converged = its < max_newton
+                break
+            excess = np.linalg.norm(force, axis=1) - w[idx]
+            bad = excess > 1e-9 * w[idx]
+            if not np.any(bad):
+                converged = its < max_newton
+                break
+            # Reopen the worst violated segment of each cluster; push its movable side off
+            # along the pull so Newton starts on the side where the segment has length.
+            cand = idx[bad]
+            order = np.argsort(-excess[bad])
+            cand, dirs = cand[order], force[bad][order]
+            _, first = np.unique(con.top[cand], return_index=True)
+            cand, dirs = cand[first], dirs[first]
+            collapsed[cand] = False
+            split = _Contraction(parent, levels, depth, fixed, collapsed)
+            for i, f in zip(cand, dirs):
+                # The side without a fixed node is the one the pull acts on.
+                side = i if split.n_fixed[i] == 0 else split.top[parent[i]]
+                x[split.top == side] += (1e-7 * scale / np.linalg.norm(f)) * f
+    position = tree.position.copy()
+    position[free] = centre + x[free] @ basis
+    if bounds is not None:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+        position[free] = np.clip(position[free], lo, hi)
+    seg = parent >= 0
+    final = np.zeros(m, dtype=bool)
+    final[seg] = np.linalg.norm(position[seg] - position[parent[seg]], axis=1) <= collapse_tol * scale
+    return BifurcationOptimum(position, vascular_cost(position, parent, w), final, converged, iterations)
+
+
+def _admissible(collapsed, parent, levels, depth, fixed):
+    """Drop collapsed segments that would join two fixed nodes into one cluster."""
+    collapsed = collapsed.copy()
+    while True:
+        con = _Contraction(parent, levels, depth, fixed, collapsed)
+        bad = con.n_fixed[con.top] > 1
+        if not np.any(bad & collapsed):
+            return collapsed
+        # Reopen the collapsed segments of over-fixed clusters nearest their tops first.
+        cand = np.flatnonzero(bad & collapsed)
+        collapsed[cand[np.argmin(depth[cand])]] = False
+
+
+
+# --------------------------------------------------------------------------------------
+# Polish of an annealing state
+
+
+def polish(problem, state: kernel.State) -> dict:
+    """Move the state's bifurcations towards the vascular optimum where the total cost drops.
+
+    The topology and the terminals are untouched. The optimum of C_v + C_w is applied whole
+    when the total annealed cost (every active term) does not rise; otherwise the largest
+    step old -> optimum, halving, that lowers the total is taken (the vascular part, being
+    convex, is no worse anywhere on the way), and then single bifurcations are moved to
+    their optimal positions one by one where that lowers the total (exact kernel deltas).
+    Every cache and running sum of ``state`` is then rebuilt from the tree
+    (:func:`vasc_pipeline.kernel.initialise`); the generator state and the counters are
+    left as they were, so polish draws no random numbers from the run.
+
+    Returns
+    -------
+    dict with ``before`` and ``after`` (cost terms, recomputed from the tree, plus
+    ``total``) [W], ``applied`` ("full", "partial" or "none") and ``moved`` (number of
+    bifurcations moved).
+    """
+    from .engine import running_costs, tree_of
+
+    model = problem.model
+    rng_saved = state.rng.copy()
+    counters_saved = state.counters.copy()
+    kernel.initialise(model, state)  # fresh sums: compare against the tree's true cost
+    before = running_costs(problem, state)
+    tree = tree_of(problem, state)
+    weights = vascular_weights(tree, problem.physics)
+    opt = optimal_bifurcations(tree, weights, problem.tissue.bounds)
+    bif = np.flatnonzero(tree.kind == KIND_BIFURCATION)
+    old = tree.position[bif].copy()
+    target = opt.position[bif]
+    applied = "none"
+    t = 1.0
+    for _ in range(30):
+        state.position[bif] = old + t * (target - old)
+        kernel.initialise(model, state)
+        if running_costs(problem, state)["total"] <= before["total"]:
+            applied = "full" if t == 1.0 else "partial"
+            break
+        t *= 0.5
+    else:
+        state.position[bif] = old
+        kernel.initialise(model, state)
+    if applied != "full":
+        # Single-node moves to the optimum, accepted only downhill (temperature ~0).
+        new = np.empty(3)
+        for _ in range(3):
+            accepted = 0
+            for k, i in enumerate(bif):
+                if np.array_equal(state.position[i], target[k]):
+                    continue
+                new[:] = target[k]
+                accepted += kernel.translate_node(model, state, int(i), new, 1e-300) == kernel.ACCEPTED
+            if accepted == 0:
+                break
+        kernel.initialise(model, state)
+        if running_costs(problem, state)["total"] > before["total"]:  # rounding of the running sums
+            state.position[bif] = old
+            kernel.initialise(model, state)
+        elif not np.array_equal(state.position[bif], old):
+            applied = "partial"
+    state.rng[:] = rng_saved
+    state.counters[:] = counters_saved
+    after = running_costs(problem, state)
+    moved = int(np.count_nonzero(np.any(state.position[bif] != old, axis=1)))
+    return {"before": before, "after": after, "applied": applied, "moved": moved}
+
+
+# --------------------------------------------------------------------------------------
+# Exhaustive search on small instances
+
+
+def topologies(n_terminals: int):
+    """Yield the parent array (2n,) of every rooted binary tree on n labelled terminals.
+
+    Layout as :class:`~vasc_pipeline.tree.Tree` with one inlet: inlet 0, terminals 1..n,
+    bifurcations n+1..2n-1. Terminal k is inserted into every segment of each tree on the
+    first k - 1 terminals, giving (2n - 3)!! trees (15, 105, 945 for n = 4, 5, 6).
+    """
+    if n_terminals < 2:
+        raise ValueError(f"n_terminals must be >= 2, got {n_terminals}")
+    m = 2 * n_terminals
+
+    def grow(parent, k, next_bif):
+        if k > n_terminals:
+            yield parent.copy()
+            return
+        for seg in [i for i in range(1, m) if parent[i] >= 0]:
+            p = parent[seg]
+            parent[next_bif] = p
+            parent[seg] = next_bif
+            parent[k] = next_bif
+            yield from grow(parent, k + 1, next_bif + 1)
+            parent[seg] = p
+            parent[k] = -1
+            parent[next_bif] = -1
+
+    parent = np.full(m, -1, dtype=np.int64)
+    parent[1] = 0
+    yield from grow(parent, 2, n_terminals + 1)
+
+
+def best_topology(inlet: np.ndarray, terminals: np.ndarray, physics: Physics,
+                  bounds: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, Tree, list[float]]:
+    """The global minimum of C_v + C_w over every topology on fixed terminals, one inlet.
+
+    Parameters
+    ----------
+    inlet : float64 (3,) [m]
+    terminals : float64 (n, 3) [m]
+    physics : Physics
+        Gives the per-length weights (n_terminals must equal n, one inlet).
+
+    Returns
+    -------
+    (cost [W], optimal Tree, the optimal cost of every topology in enumeration order)
+    """
+    terminals = np.atleast_2d(np.asarray(terminals, dtype=np.float64))
+    n = len(terminals)
+    if physics.n_terminals != n or physics.n_inlets != 1:
+        raise ValueError(f"physics must describe {n} terminals and one inlet")
+    best, best_tree, costs = np.inf, None, []
+    for parent in topologies(n):
+        position = np.zeros((2 * n, 3))
+        position[0] = inlet
+        position[1:n + 1] = terminals
+        tree = Tree(parent, children_from_parent(parent), position, count_terminals(parent, n, 1), 1)
+        _place_from_children(tree)
+        res = optimal_bifurcations(tree, vascular_weights(tree, physics), bounds)
+        costs.append(res.cost)
+        if res.cost < best:
+            best, best_tree = res.cost, Tree(tree.parent, tree.children, res.position, tree.n_downstream, 1)
+    return best, best_tree, costs
+
+
+def _place_from_children(tree: Tree) -> None:
+    """Start each bifurcation at the mean of its terminals (a point inside their hull)."""
+    k, n = tree.n_inlets, tree.n_terminals
+    sums = np.zeros((tree.n_nodes, 3))
+    for t in range(k, k + n):
+        node = tree.parent[t]
+        while node >= k + n:
+            sums[node] += tree.position[t]
+            node = tree.parent[node]
+    bif = np.arange(k + n, tree.n_nodes)
+    tree.position[bif] = sums[bif] / tree.n_downstream[bif, None]
