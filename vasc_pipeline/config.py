@@ -63,14 +63,29 @@ class PhysicsConfig:
 
 @dataclass
 class AnnealConfig:
+    """The schedule and moves. ``anneal=paper`` and ``anneal=fast`` (conf/anneal/) are presets."""
+
     name: str = "paper"
-    T_start: float = 1e10
-    T_end: float = 1e-5
+    T_start: Optional[float] = 1e10      # W; None: calibrated so uphill moves start accept_start accepted
+    T_end: Optional[float] = 1e-5        # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
+    accept_start: float = 0.8            # mean acceptance of uphill moves at a calibrated T_start
+    T_end_rel: float = 1e-4              # calibrated T_end relative to w(1) R_supply
+    calibration_samples: int = 4000      # infinite-temperature moves measured for T_start
     steps: Optional[int] = None          # proposed moves; None: steps_at_1000 * (N / 1000)^2
     steps_at_1000: float = PAPER_STEPS_AT_1000
     p_swap: float = 0.5                  # probability that a proposal is a swap
-    step_terminal: float = 0.5           # translation half-width for terminals, in R_supply
-    step_bifurcation: float = 1.0        # translation half-width for bifurcations, in R_supply
+    p_local: float = 0.0                 # probability that a swap partner is a spatial neighbour (else uniform)
+    neighbour_cell: float = 1.0          # edge of the neighbour cells, in R_supply
+    step_terminal: float = 0.5           # translation half-width for terminals, in R_supply (the cap when adapted)
+    step_bifurcation: float = 1.0        # translation half-width for bifurcations, in R_supply (the cap when adapted)
+    supply_T_start: Optional[float] = None  # supply's own temperature at step 0, in units of the voxels of one
+                                         # supply sphere; None: supply is searched downhill throughout (the paper)
+    supply_T_end: float = 0.05           # ... at the end of its phase, in C_s units (0.05: +1 accepted at e^-20)
+    supply_phase: float = 0.5            # fraction of the steps the supply schedule runs; then the true weight
+    adapt_steps: bool = False            # adapt half-widths to keep acceptance near acceptance_target
+    acceptance_target: float = 0.3       # per node class (terminal, bifurcation)
+    adapt_window: int = 1000             # proposals of a class between adaptations
+    polish: bool = False                 # optimise the final topology's bifurcation positions (geometry.polish)
     trace_every: int = 100_000           # steps between trace records
 
 
@@ -150,10 +165,30 @@ def validate(cfg: RunConfig) -> RunConfig:
         if not (value >= 0 and math.isfinite(value)):
             raise ConfigError(f"physics.{name} must be a finite number >= 0, got {value}")
     a = cfg.anneal
-    _positive("anneal.T_start", a.T_start)
-    _positive("anneal.T_end", a.T_end)
-    if a.T_end >= a.T_start:
+    if a.T_start is not None:
+        _positive("anneal.T_start", a.T_start)
+    if a.T_end is not None:
+        _positive("anneal.T_end", a.T_end)
+    if a.T_start is not None and a.T_end is not None and a.T_end >= a.T_start:
         raise ConfigError(f"anneal.T_end must be < anneal.T_start, got T_end={a.T_end} >= T_start={a.T_start}")
+    for name in ("accept_start", "acceptance_target"):
+        if not 0.0 < getattr(a, name) < 1.0:
+            raise ConfigError(f"anneal.{name} must lie in (0, 1), got {getattr(a, name)}")
+    _positive("anneal.T_end_rel", a.T_end_rel)
+    if a.supply_T_start is not None:
+        _positive("anneal.supply_T_start", a.supply_T_start)
+        _positive("anneal.supply_T_end", a.supply_T_end)
+        if a.supply_T_end >= a.supply_T_start:
+            raise ConfigError(f"anneal.supply_T_end must be < anneal.supply_T_start, got {a.supply_T_end} >= "
+                              f"{a.supply_T_start}")
+    if not 0.0 < a.supply_phase <= 1.0:
+        raise ConfigError(f"anneal.supply_phase must lie in (0, 1], got {a.supply_phase}")
+    _positive("anneal.neighbour_cell", a.neighbour_cell)
+    for name in ("calibration_samples", "adapt_window"):
+        if not isinstance(getattr(a, name), int) or getattr(a, name) < 1:
+            raise ConfigError(f"anneal.{name} must be an integer >= 1, got {getattr(a, name)}")
+    if not 0.0 <= a.p_local <= 1.0:
+        raise ConfigError(f"anneal.p_local must lie in [0, 1], got {a.p_local}")
     if a.steps is not None and (not isinstance(a.steps, int) or a.steps < 1):
         raise ConfigError(f"anneal.steps must be an integer >= 1 (proposed moves per run), got {a.steps}")
     _positive("anneal.steps_at_1000", a.steps_at_1000)

@@ -13,6 +13,7 @@ between blocks with :func:`state_arrays` / :func:`restore_state`.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
@@ -20,15 +21,15 @@ from typing import Any, Callable
 import numpy as np
 
 from . import kernel
-from .config import RunConfig, scheduled_steps, to_run_config, validate
+from .config import ConfigError, RunConfig, scheduled_steps, to_run_config, validate
 from .costs import COST_TERMS, ActiveTerms, active_terms, full_costs
 from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
 from .tissue import Tissue, build_tissue
 from .tree import Tree, TreeError, load_terminal_sites, random_tree
 
-__all__ = ["Problem", "RunResult", "build_problem", "initial_state", "run_block", "running_costs", "tree_of",
-           "state_arrays", "restore_state", "run", "CHECKPOINT_FIELDS"]
+__all__ = ["Problem", "RunResult", "build_problem", "initial_state", "calibrate_schedule", "run_block", "finish",
+           "running_costs", "tree_of", "state_arrays", "restore_state", "run", "CHECKPOINT_FIELDS"]
 
 # State fields saved in a checkpoint (everything but scratch space).
 CHECKPOINT_FIELDS = tuple(f for f in kernel.State._fields if not f.startswith("scratch_"))
@@ -60,6 +61,7 @@ class RunResult:
     wall_seconds: float
     trace: dict[str, np.ndarray] = field(repr=False)
     counters: np.ndarray = field(repr=False)
+    anneal: dict[str, Any] = field(default_factory=dict)  # schedule as run, final step sizes, polish report
 
     @property
     def radius(self) -> np.ndarray:
@@ -98,6 +100,16 @@ def build_problem(config: Any) -> Problem:
     w_o, w_p, w_s = physics.weights
     lo, hi = tissue.bounds
     total_steps = scheduled_steps(cfg)
+    a = cfg.anneal
+    cell_size = a.neighbour_cell * physics.supply_radius
+    cell_shape = np.maximum(np.ceil((hi - lo) / cell_size), 1).astype(np.int64)
+    if tissue.ndim == 2:
+        cell_shape[2] = 1
+    if np.prod(cell_shape) > 20_000_000:
+        raise ConfigError(f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
+                          "cells (at most 2e7); use a larger value (in R_supply, default 1)")
+    rho = physics.supply_radius / tissue.voxel_size
+    sphere_voxels = math.pi * rho ** 2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho ** 3  # C_s scale of one move
     model = kernel.Model(
         n_inlets=k, n_terminals=n, tables=cost_tables(physics).array,
         mask=tissue.mask, distance=tissue.distance, origin=tissue.origin,
@@ -107,28 +119,72 @@ def build_problem(config: Any) -> Problem:
         supply_on=terms.supply, exclusion_on=terms.exclusion, pressure_on=terms.pressure,
         move_terminals=not cfg.terminals.fixed, planar=tissue.ndim == 2,
         pressure_inlet=p.pressure_inlet, pressure_terminal=p.pressure_terminal,
-        T_start=float(cfg.anneal.T_start), T_end=float(cfg.anneal.T_end), total_steps=float(total_steps),
-        p_swap=float(cfg.anneal.p_swap))
+        total_steps=float(total_steps), p_swap=float(a.p_swap), p_local=float(a.p_local),
+        cell_lo=lo.astype(np.float64), cell_size=float(cell_size), cell_shape=cell_shape,
+        supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels, supply_T_end=float(a.supply_T_end),
+        supply_steps=float(round(a.supply_phase * total_steps)) if a.supply_T_start is not None else 0.0,
+        adapt_steps=bool(a.adapt_steps), acceptance_target=float(a.acceptance_target),
+        adapt_window=int(a.adapt_window),
+        step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius)
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
 
 def initial_state(problem: Problem, seed: int) -> kernel.State:
-    """The random initial tree of (config, seed) with its caches and running sums filled."""
+    """The random initial tree of (config, seed) with its caches, running sums and schedule filled.
+
+    Temperatures left unset in the config (``anneal.T_start`` / ``anneal.T_end`` = None)
+    are calibrated here (:func:`calibrate_schedule`) and kept in ``state.schedule``, so a
+    resumed run uses the same ones.
+    """
     rng = seed_state(seed)
     tree = random_tree(problem.tissue, problem.physics.n_terminals, rng, problem.sites)
-    r_supply = problem.physics.supply_radius
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = kernel.State(
         parent=tree.parent, children=tree.children, position=tree.position, n_downstream=tree.n_downstream,
         seg_length=np.zeros(m), seg_exclusion=np.zeros(m), supply=np.zeros(problem.tissue.shape, dtype=np.int32),
         costs=np.zeros(len(COST_TERMS)), compensation=np.zeros(len(COST_TERMS)), rng=rng,
-        counters=np.zeros(kernel.N_COUNTERS, dtype=np.int64),
-        step_size=np.array([anneal.step_terminal * r_supply, anneal.step_bifurcation * r_supply]),
+        counters=np.zeros(kernel.N_COUNTERS, dtype=np.int64), step_size=problem.model.step_max.copy(),
+        schedule=np.array([np.nan, np.nan]), cell_of=np.zeros(m, dtype=np.int64),
+        cell_head=np.zeros(int(np.prod(problem.model.cell_shape)), dtype=np.int64),
+        cell_next=np.zeros(m, dtype=np.int64), cell_prev=np.zeros(m, dtype=np.int64),
         scratch_mark=np.zeros(m, dtype=np.int64), scratch_stack=np.zeros(m, dtype=np.int64),
         scratch_pressure=np.zeros(m))
     kernel.initialise(problem.model, state)
+    state.schedule[:] = calibrate_schedule(problem, state) if None in (anneal.T_start, anneal.T_end) \
+        else (anneal.T_start, anneal.T_end)
     return state
+
+
+def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, float]:
+    """(T_start, T_end) [W] from the cost scale of the problem; configured values are kept.
+
+    T_start: the temperature at which the uphill moves of an infinite-temperature random
+    walk from ``state`` (swaps and bifurcation translations, measured on a copy with a
+    copy of its generator: the run's random stream is untouched) are accepted with mean
+    probability ``anneal.accept_start``, the usual criterion (Johnson et al. 1989).
+    T_end: ``anneal.T_end_rel`` times the cost of one terminal segment of length R_supply,
+    w(1) R_supply: well below it no uphill rearrangement of the finest branches survives,
+    so colder steps would be wasted. T_start is raised to 10 T_end if it came out lower.
+    """
+    a = problem.config.anneal
+    tables = cost_tables(problem.physics)
+    t_end = a.T_end if a.T_end is not None else \
+        a.T_end_rel * float(tables.volume[1] + tables.power[1]) * problem.physics.supply_radius
+    if a.T_start is not None:
+        return float(a.T_start), float(t_end)
+    walker = restore_state(problem, state_arrays(state))
+    uphill = np.empty(a.calibration_samples)
+    uphill = uphill[:kernel.sample_uphill(problem.model, walker, a.calibration_samples, uphill)]
+    t_start = 10.0 * t_end
+    if uphill.size:
+        # Mean acceptance exp(-dC/T) rises monotonically with T: bisect on log T.
+        lo, hi = np.log(uphill.min()) - 10.0, np.log(uphill.max()) + 10.0
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.mean(np.exp(-uphill / np.exp(mid))) < a.accept_start else (lo, mid)
+        t_start = max(t_start, float(np.exp(hi)))
+    return t_start, float(t_end)
 
 
 def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
@@ -161,7 +217,8 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.Sta
     """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed."""
     m = 2 * problem.physics.n_terminals
     dtypes = {"parent": np.int64, "children": np.int64, "n_downstream": np.int64, "supply": np.int32,
-              "rng": np.uint64, "counters": np.int64}
+              "rng": np.uint64, "counters": np.int64, "cell_of": np.int64, "cell_head": np.int64,
+              "cell_next": np.int64, "cell_prev": np.int64}
     fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes.get(name, np.float64)).copy()
               for name in CHECKPOINT_FIELDS}
     return kernel.State(**fields, scratch_mark=np.zeros(m, dtype=np.int64), scratch_stack=np.zeros(m, dtype=np.int64),
@@ -179,7 +236,7 @@ class Trace:
     def record(self, problem: Problem, state: kernel.State, proposed: int, accepted: int) -> None:
         step = int(state.counters[kernel.COUNTER_STEP])
         costs = running_costs(problem, state)
-        temp = kernel.temperature(problem.model, max(step - 1, 0))
+        temp = kernel.temperature(problem.model, state, max(step - 1, 0))
         self.rows.append((step, temp, *(costs[c] for c in COST_TERMS), costs["total"],
                           accepted / proposed if proposed else 0.0))
 
@@ -194,6 +251,25 @@ def accepted_moves(state: kernel.State) -> int:
     c = state.counters
     return int(c[kernel.COUNTER_TERMINAL_ACCEPTED] + c[kernel.COUNTER_BIFURCATION_ACCEPTED]
                + c[kernel.COUNTER_SWAP_ACCEPTED])
+
+
+def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
+    """After the last step: polish the geometry when ``anneal.polish``; report how the anneal ran.
+
+    Deterministic and draws no random number, so a resumed run finishes identically.
+    Returns the ``anneal`` report stored with a run: the schedule's temperatures [W], the
+    final translation half-widths [m] and, with polish, its before/after costs.
+    """
+    report: dict[str, Any] = {"T_start": float(state.schedule[0]), "T_end": float(state.schedule[1]),
+                              "step_terminal": float(state.step_size[0]),
+                              "step_bifurcation": float(state.step_size[1])}
+    if problem.config.anneal.polish:
+        from .geometry import polish
+
+        result = polish(problem, state)
+        report["polish"] = {"applied": result["applied"], "moved": result["moved"],
+                            "total_before": result["before"]["total"], "total_after": result["after"]["total"]}
+    return report
 
 
 def run(config: Any, seed: int | None = None, *, block_steps: int | None = None,
@@ -219,9 +295,10 @@ def run(config: Any, seed: int | None = None, *, block_steps: int | None = None,
         trace.record(problem, state, n, accepted_moves(state) - before)
         if progress is not None:
             progress(int(state.counters[kernel.COUNTER_STEP]), total, running_costs(problem, state))
+    report = finish(problem, state)
     tree = tree_of(problem, state)
     return RunResult(
         tree=tree, problem=problem, seed=seed, costs=running_costs(problem, state),
         costs_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
         steps=int(state.counters[kernel.COUNTER_STEP]), wall_seconds=time.perf_counter() - start,
-        trace=trace.arrays(), counters=state.counters.copy())
+        trace=trace.arrays(), counters=state.counters.copy(), anneal=report)

@@ -134,12 +134,14 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
                 last_checkpoint = time.perf_counter()
 
         trace_length = store.append_trace(trace.arrays(), trace_length)
+        report = engine.finish(problem, state)
         tree = engine.tree_of(problem, state)
         store.write_final(
             parent=tree.parent, position=tree.position, radius=engine.node_radii(tree, problem.physics),
             kind=tree.kind, physics=problem.physics.as_attrs(), cost=engine.running_costs(problem, state),
             cost_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
-            steps_done=int(state.counters[kernel.COUNTER_STEP]), trace_length=trace_length, wall_seconds=wall())
+            steps_done=int(state.counters[kernel.COUNTER_STEP]), trace_length=trace_length, wall_seconds=wall(),
+            anneal=report)
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(job, store, "complete", resumed_from, session_steps, time.perf_counter() - started, seen,
                         time.process_time() - cpu_started)

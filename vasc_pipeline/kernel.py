@@ -38,8 +38,14 @@ Model = namedtuple("Model", [
     "w_exclusion", "w_pressure", "w_supply",  # scaled weights A_x / A_wv
     "supply_on", "exclusion_on", "pressure_on", "move_terminals", "planar",
     "pressure_inlet", "pressure_terminal",    # Pa
-    "T_start", "T_end", "total_steps",        # exponential schedule
+    "total_steps",       # length of the exponential schedule (its ends are in State.schedule)
     "p_swap",            # probability that a proposal is a swap
+    "p_local",           # probability that a swap partner is drawn from the neighbour cells (0: uniform only)
+    "cell_lo", "cell_size", "cell_shape",     # neighbour cell grid: lower corner (m), edge (m), int64 (3,) [x, y, z]
+    "supply_T_start", "supply_T_end", "supply_steps",  # supply's own schedule (C_s units) over the first
+                         # supply_steps proposals; supply_steps = 0: off, the supply weight is w_supply throughout
+    "adapt_steps",       # adapt translation half-widths to keep acceptance near acceptance_target
+    "acceptance_target", "adapt_window", "step_max",  # step_max float64 (2,) m: the configured half-widths
 ])
 
 State = namedtuple("State", [
@@ -51,12 +57,16 @@ State = namedtuple("State", [
     "rng",               # uint64 (4,)
     "counters",          # int64 (8,) see COUNTER_*
     "step_size",         # float64 (2,) translation half-width for terminals, bifurcations [m]
+    "schedule",          # float64 (2,) T_start, T_end (configured, or calibrated at step 0)
+    "cell_of", "cell_head", "cell_next", "cell_prev",  # int64: neighbour cell lists of non-inlet nodes
     "scratch_mark", "scratch_stack", "scratch_pressure",
 ])
 
 (COUNTER_STEP, COUNTER_TERMINAL_PROPOSED, COUNTER_TERMINAL_ACCEPTED, COUNTER_BIFURCATION_PROPOSED,
- COUNTER_BIFURCATION_ACCEPTED, COUNTER_SWAP_PROPOSED, COUNTER_SWAP_ACCEPTED) = range(7)
-N_COUNTERS = 8
+ COUNTER_BIFURCATION_ACCEPTED, COUNTER_SWAP_PROPOSED, COUNTER_SWAP_ACCEPTED, COUNTER_LOCAL_SWAP_PROPOSED,
+ COUNTER_WINDOW_TERMINAL_PROPOSED, COUNTER_WINDOW_TERMINAL_ACCEPTED, COUNTER_WINDOW_BIFURCATION_PROPOSED,
+ COUNTER_WINDOW_BIFURCATION_ACCEPTED) = range(12)
+N_COUNTERS = 12
 
 VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = range(5)
 ILLEGAL, REJECTED, ACCEPTED = -1, 0, 1  # outcomes of a proposal
@@ -76,10 +86,28 @@ def _add(costs, compensation, k, x):
 
 
 @jit
-def temperature(model, step):
-    """Exponential schedule T_start -> T_end over total_steps; T_end afterwards."""
+def temperature(model, state, step):
+    """Exponential schedule ``state.schedule`` = (T_start, T_end) over total_steps; T_end afterwards."""
     frac = min(step / model.total_steps, 1.0)
-    return model.T_start * math.exp(math.log(model.T_end / model.T_start) * frac)
+    t_start = state.schedule[0]
+    return t_start * math.exp(math.log(state.schedule[1] / t_start) * frac)
+
+
+@jit_inline
+def supply_weight(model, state, temp):
+    """Weight of ΔC_s in the Metropolis test at ``temp``.
+
+    While the supply schedule runs, uphill supply moves are accepted with probability
+    exp(-ΔC_s / T_s) (T_s falling exponentially from supply_T_start to supply_T_end): the
+    weight is temp / T_s, never above w_supply. Afterwards (and when off) it is w_supply,
+    so the run ends on the true cost.
+    """
+    step = state.counters[COUNTER_STEP]
+    if step >= model.supply_steps:
+        return model.w_supply
+    frac = step / model.supply_steps
+    t_s = model.supply_T_start * math.exp(math.log(model.supply_T_end / model.supply_T_start) * frac)
+    return min(model.w_supply, temp / t_s)
 
 
 @jit_inline
@@ -362,6 +390,101 @@ def pressure_cost(model, state):
     return total
 
 
+# --- Neighbour cells (swap partners biased towards spatial neighbours) -------------------
+# Linked lists of non-inlet nodes per cell of a grid over the box. They live in State (the
+# list order decides which partner a draw picks, so it is checkpointed, not rebuilt).
+
+
+@jit_inline
+def _cell_coords(model, p):
+    """Cell (cx, cy, cz) of a point, clipped to the cell grid."""
+    h = model.cell_size
+    cx = min(max(math.floor((p[0] - model.cell_lo[0]) / h), 0), model.cell_shape[0] - 1)
+    cy = min(max(math.floor((p[1] - model.cell_lo[1]) / h), 0), model.cell_shape[1] - 1)
+    cz = min(max(math.floor((p[2] - model.cell_lo[2]) / h), 0), model.cell_shape[2] - 1)
+    return cx, cy, cz
+
+
+@jit_inline
+def _cell_of_point(model, p):
+    cx, cy, cz = _cell_coords(model, p)
+    return (cz * model.cell_shape[1] + cy) * model.cell_shape[0] + cx
+
+
+@jit_inline
+def _cell_insert(state, i, c):
+    head = state.cell_head[c]
+    state.cell_next[i] = head
+    state.cell_prev[i] = -1
+    if head >= 0:
+        state.cell_prev[head] = i
+    state.cell_head[c] = i
+    state.cell_of[i] = c
+
+
+@jit_inline
+def _cell_remove(state, i):
+    c = state.cell_of[i]
+    nxt = state.cell_next[i]
+    prv = state.cell_prev[i]
+    if prv >= 0:
+        state.cell_next[prv] = nxt
+    else:
+        state.cell_head[c] = nxt
+    if nxt >= 0:
+        state.cell_prev[nxt] = prv
+
+
+@jit_inline
+def _cell_update(model, state, i, p):
+    """Move node i's entry to the cell of its new position p."""
+    c = _cell_of_point(model, p)
+    if c != state.cell_of[i]:
+        _cell_remove(state, i)
+        _cell_insert(state, i, c)
+
+
+@jit
+def build_cells(model, state):
+    """Fill the cell lists from the node positions (inlets are never swap partners)."""
+    state.cell_head[:] = -1
+    state.cell_of[:] = -1
+    state.cell_next[:] = -1
+    state.cell_prev[:] = -1
+    for i in range(model.n_inlets, state.parent.size):
+        _cell_insert(state, i, _cell_of_point(model, state.position[i]))
+
+
+@jit
+def neighbour_partner(model, state, a, rng):
+    """A node drawn uniformly from those in a's cell and the cells around it (a excluded); -1 if none.
+
+    The relation "in adjacent cells" is symmetric and a swap moves no node, so the forward
+    and reverse proposals of a swap have the same probability: detailed balance holds.
+    """
+    ax, ay, az = _cell_coords(model, state.position[a])
+    nx_, ny_, nz_ = model.cell_shape[0], model.cell_shape[1], model.cell_shape[2]
+    count = 0
+    pick = -1
+    for sweep in range(2):  # first count the candidates, then walk to the drawn one
+        if sweep == 1:
+            if count == 0:
+                return -1
+            pick = next_below(rng, count)
+            count = 0
+        for cz in range(max(az - 1, 0), min(az + 1, nz_ - 1) + 1):
+            for cy in range(max(ay - 1, 0), min(ay + 1, ny_ - 1) + 1):
+                for cx in range(max(ax - 1, 0), min(ax + 1, nx_ - 1) + 1):
+                    x = state.cell_head[(cz * ny_ + cy) * nx_ + cx]
+                    while x >= 0:
+                        if x != a:
+                            if count == pick:
+                                return x
+                            count += 1
+                        x = state.cell_next[x]
+    return -1
+
+
 @jit
 def initialise(model, state):
     """Fill the per-segment caches, the supply map and the running sums from the tree."""
@@ -395,6 +518,7 @@ def initialise(model, state):
         state.costs[SUPPLY] = c_s
     if model.pressure_on:
         state.costs[PRESSURE] = pressure_cost(model, state)
+    build_cells(model, state)
 
 
 @jit
@@ -443,12 +567,43 @@ def _translate(model, state, temp, new):
         if n_nodes == first_bif:
             return ILLEGAL
         i = first_bif + next_below(rng, n_nodes - first_bif)
-    half = state.step_size[0 if i < first_bif else 1]
+    cls = 0 if i < first_bif else 1
+    half = state.step_size[cls]
+    # With adapted steps, half of the terminal moves keep the full width: the supply term
+    # is optimised by downhill search over moves of voxel scale, which narrowed steps
+    # (sub-voxel, accepted for their vascular gain) would stop.
+    full_width = model.adapt_steps and cls == 0 and next_double(rng) < 0.5
+    if full_width:
+        half = model.step_max[0]
     for a in range(3):
         new[a] = pos[i, a] + (2.0 * next_double(rng) - 1.0) * half
     if model.planar:
         new[2] = pos[i, 2]
-    return translate_node(model, state, i, new, temp)
+    outcome = translate_node(model, state, i, new, temp)
+    if model.adapt_steps and not full_width:
+        _adapt_step(model, state, cls, outcome == ACCEPTED)
+    return outcome
+
+
+@jit_inline
+def _adapt_step(model, state, cls, accepted):
+    """Scale a class's translation half-width after every window of its proposals.
+
+    Acceptance above the target widens the step, below narrows it (factor exp(2 (rate -
+    target))), so steps shrink as the temperature falls; capped at the configured width.
+    Counts live in the state's counters: block splits and resumes do not change it.
+    """
+    c = state.counters
+    c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls] += 1
+    if accepted:
+        c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] += 1
+    n = c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls]
+    if n >= model.adapt_window:
+        rate = c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] / n
+        width = state.step_size[cls] * math.exp(2.0 * (rate - model.acceptance_target))
+        state.step_size[cls] = min(max(width, 1e-9 * model.step_max[cls]), model.step_max[cls])
+        c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls] = 0
+        c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] = 0
 
 
 @jit
@@ -507,9 +662,10 @@ def translate_node(model, state, i, new, temp):
     d_sup = 0.0
     if is_terminal and model.supply_on:
         d_sup = supply_move_delta(model, state.supply, pos[i], new)
+    w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
     u = -1.0
     if not model.pressure_on:
-        bound = (d_vol + d_pow) - model.w_exclusion * old_exc + model.w_supply * d_sup
+        bound = (d_vol + d_pow) - model.w_exclusion * old_exc + w_sup * d_sup
         rejected, u = _early_reject(bound, temp, rng)
         if rejected:
             return REJECTED
@@ -548,12 +704,14 @@ def translate_node(model, state, i, new, temp):
         if not is_terminal:
             state.seg_length[c0] = old_len_c0
             state.seg_length[c1] = old_len_c1
-    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + model.w_supply * d_sup
+    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + w_sup * d_sup
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_TERMINAL_ACCEPTED + 2 * cls] += 1
     if is_terminal and model.supply_on:
         supply_move(model, state.supply, pos[i], new)
+    if model.p_local > 0.0:
+        _cell_update(model, state, i, new)
     pos[i, 0] = new[0]
     pos[i, 1] = new[1]
     pos[i, 2] = new[2]
@@ -637,9 +795,17 @@ def _swap(model, state, temp):
     k_in = model.n_inlets
     n_movable = state.parent.size - k_in
     a = k_in + next_below(rng, n_movable)
-    b = k_in + next_below(rng, n_movable - 1)
-    if b >= a:
-        b += 1
+    # The paper's uniform partner draws no extra number, so its random stream is unchanged.
+    if model.p_local > 0.0 and next_double(rng) < model.p_local:
+        state.counters[COUNTER_LOCAL_SWAP_PROPOSED] += 1
+        b = neighbour_partner(model, state, a, rng)
+        if b < 0:
+            state.counters[COUNTER_SWAP_PROPOSED] += 1
+            return ILLEGAL
+    else:
+        b = k_in + next_below(rng, n_movable - 1)
+        if b >= a:
+            b += 1
     return swap_nodes(model, state, a, b, temp)
 
 
@@ -742,9 +908,52 @@ def anneal_block(model, state, n_steps):
     new = np.empty(3)
     for _ in range(n_steps):
         step = state.counters[COUNTER_STEP]
-        temp = temperature(model, step)
+        temp = temperature(model, state, step)
         if next_double(state.rng) < model.p_swap:
             _swap(model, state, temp)
         else:
             _translate(model, state, temp, new)
         state.counters[COUNTER_STEP] = step + 1
+
+
+@jit
+def scaled_total_without_supply(model, state):
+    """The annealed total C of the running sums less its supply term [W].
+
+    The supply term (weight 1e26 by default) would swamp every other term's rounding in
+    a difference of totals; moves that leave the supply alone are compared on this.
+    """
+    v = state.costs + state.compensation
+    return (v[VOLUME] + v[POWER]) + model.w_exclusion * v[EXCLUSION] + model.w_pressure * v[PRESSURE]
+
+
+@jit
+def sample_uphill(model, state, n_samples, out):
+    """Random walk at infinite temperature; store the uphill ΔC of its moves in ``out``.
+
+    Swaps and bifurcation translations only: they leave the supply term alone, whose weight
+    (A_s / A_wv = 1e26) makes it a constraint, not part of the temperature scale. Run it
+    on a copy of a state: every legal proposal is accepted. Returns how many ΔC > 0
+    were stored (at most ``out.size``).
+    """
+    new = np.empty(3)
+    first_bif = model.n_inlets + model.n_terminals
+    n_bif = state.parent.size - first_bif
+    stored = 0
+    for _ in range(n_samples):
+        before = scaled_total_without_supply(model, state)
+        if n_bif == 0 or next_double(state.rng) < 0.5:
+            _swap(model, state, np.inf)
+        else:
+            i = first_bif + next_below(state.rng, n_bif)
+            half = state.step_size[1]
+            for a in range(3):
+                new[a] = state.position[i, a] + (2.0 * next_double(state.rng) - 1.0) * half
+            if model.planar:
+                new[2] = state.position[i, 2]
+            translate_node(model, state, i, new, np.inf)
+        d = scaled_total_without_supply(model, state) - before
+        if d > 0.0 and stored < out.size:
+            out[stored] = d
+            stored += 1
+    return stored

@@ -401,8 +401,12 @@ class RunStore:
 
     def write_final(self, *, parent: np.ndarray, position: np.ndarray, radius: np.ndarray, kind: np.ndarray,
                     physics: Mapping[str, Any], cost: Mapping[str, float], cost_recomputed: Mapping[str, float],
-                    steps_done: int, trace_length: int, wall_seconds: float) -> None:
-        """Write the final tree, then mark the run complete in one attribute write, then tidy up."""
+                    steps_done: int, trace_length: int, wall_seconds: float,
+                    anneal: Mapping[str, Any] | None = None) -> None:
+        """Write the final tree, then mark the run complete in one attribute write, then tidy up.
+
+        ``anneal``: how the schedule ran (:func:`vasc_pipeline.engine.finish`), stored as attrs["anneal"].
+        """
         group = self.group.require_group("tree")
         specs = (("parent", parent, "int64", ["node"], "parent node (-1 at inlets)", "1"),
                  ("position", position, "float64", ["node", "xyz"], "node position", "m"),
@@ -415,8 +419,7 @@ class RunStore:
             arr[...] = data
         self._set_attrs(status=STATUS_COMPLETE, checkpoint=None, steps_done=int(steps_done),
                         trace_length=int(trace_length), wall_seconds=float(wall_seconds), physics=dict(physics),
-                        cost=dict(cost),
-                        cost_recomputed=dict(cost_recomputed))
+                        cost=dict(cost), cost_recomputed=dict(cost_recomputed), anneal=dict(anneal or {}))
         self.tidy()
 
     def tidy(self) -> None:

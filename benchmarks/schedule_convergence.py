@@ -1,0 +1,130 @@
+"""Final cost against proposed moves: ``anneal=fast`` against the paper's schedule.
+
+Runs every (schedule, moves, seed) of a case with :func:`vasc_pipeline.engine.run` in a
+process pool, prints one JSON line per run, then a table of mean ± standard error per
+(schedule, moves), and writes ``runs.jsonl``, ``table.csv`` and ``convergence.png`` to
+``--out``. Schedules: ``paper`` (the literal T 1e10 -> 1e-5), ``paper_cold`` (the same
+shape ended at T = 1e-9 W) and ``fast``.
+
+The annealed total C is A_s/A_wv C_s + (C_v + C_w) + A_o/A_wv C_o with A_s/A_wv = 1e26, so
+it orders trees by supply first; the table shows the total and its two parts: the supply
+cost C_s (voxel units) and the rest, C_v + C_w + A_o/A_wv C_o [W].
+
+    python benchmarks/schedule_convergence.py --case plane2d --out results/bench_plane2d
+    python benchmarks/schedule_convergence.py --case heart --out results/bench_heart
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+CASES = {
+    # The paper's 2-D convergence test (tissue=plane2d sets 64 terminals, gamma 3, 2.4 mm root).
+    "plane2d": {"overrides": ["tissue=plane2d"], "seeds": 8,
+                "paper": [1_000_000, 10_000_000, 100_000_000],
+                "fast": [10_000, 100_000, 1_000_000, 10_000_000]},
+    "heart": {"overrides": ["tissue=heart", "n_terminals=1000"], "seeds": 4,
+              "paper": [10_000_000, 30_000_000],
+              "fast": [300_000, 1_000_000, 3_000_000, 10_000_000]},
+}
+SCHEDULES = {"paper": ["anneal=paper"], "paper_cold": ["anneal=paper", "anneal.T_end=1e-9"], "fast": ["anneal=fast"]}
+
+
+def one_run(args: tuple[str, list[str], str, int, int]) -> dict:
+    from vasc_pipeline import config, engine
+
+    case, overrides, schedule, steps, seed = args
+    cfg = config.compose([*overrides, *SCHEDULES[schedule], f"anneal.steps={steps}", "anneal.trace_every=1000000"])
+    result = engine.run(cfg, seed=seed)
+    c = result.costs_recomputed
+    w_o = result.problem.physics.weights[0]
+    return {"case": case, "schedule": schedule, "steps": steps, "seed": seed, "total": c["total"],
+            "supply": c["supply"], "vascular_exclusion": c["volume"] + c["power"] + w_o * c["exclusion"],
+            "vascular": c["volume"] + c["power"], "wall_seconds": result.wall_seconds}
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    table = []
+    keys = sorted({(r["schedule"], r["steps"]) for r in rows}, key=lambda k: (list(SCHEDULES).index(k[0]), k[1]))
+    for schedule, steps in keys:
+        sel = [r for r in rows if r["schedule"] == schedule and r["steps"] == steps]
+        entry = {"schedule": schedule, "steps": steps, "seeds": len(sel)}
+        for name in ("total", "supply", "vascular_exclusion", "vascular", "wall_seconds"):
+            v = np.array([r[name] for r in sel])
+            entry[name] = float(v.mean())
+            entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else 0.0
+        table.append(entry)
+    return table
+
+
+def figure(table: list[dict], case: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = {"paper": "paper (T 1e10 → 1e-5)", "paper_cold": "paper shape, T_end = 1e-9 W", "fast": "fast"}
+    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8), constrained_layout=True)
+    for schedule, style in zip(SCHEDULES, ("s--", "o--", "D-")):
+        sel = [t for t in table if t["schedule"] == schedule]
+        if not sel:
+            continue
+        x = [t["steps"] for t in sel]
+        for ax, name in zip(axes, ("supply", "vascular_exclusion")):
+            ax.errorbar(x, [t[name] for t in sel], yerr=[t[name + "_se"] for t in sel], fmt=style, capsize=3,
+                        label=labels[schedule])
+    axes[0].set_ylabel("supply cost $C_s$ [voxel units]")
+    axes[1].set_ylabel(r"$C_v + C_w + (A_o/A_{wv})\,C_o$ [W]")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("proposed moves per run")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{case}: mean final cost ± standard error over seeds")
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--case", choices=sorted(CASES), default="plane2d")
+    parser.add_argument("--seeds", type=int, help="seeds per point (default: 8 for plane2d, 4 for heart)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count())
+    parser.add_argument("--out", type=Path, help="directory for runs.jsonl, table.csv, convergence.png")
+    args = parser.parse_args()
+    case = CASES[args.case]
+    seeds = range(args.seeds or case["seeds"])
+    tasks = [(args.case, case["overrides"], schedule, steps, seed)
+             for schedule in SCHEDULES for steps in case["fast" if schedule == "fast" else "paper"] for seed in seeds]
+    tasks.sort(key=lambda t: -t[3])  # longest first: the pool finishes together
+    rows = []
+    with ProcessPoolExecutor(args.workers) as pool:
+        for row in pool.map(one_run, tasks):
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    table = summarise(rows)
+    print(f"\n{args.case}: mean ± SE over {len(seeds)} seeds (total = annealed C [W]; supply = C_s; "
+          "rest = C_v + C_w + A_o/A_wv C_o [W])")
+    print(f"{'schedule':>11} {'moves':>11} {'total':>20} {'supply':>16} {'rest [W]':>22} {'wall s':>7}")
+    for t in table:
+        print(f"{t['schedule']:>11} {t['steps']:>11.3g} {t['total']:>11.5g} ±{t['total_se']:<8.2g}"
+              f"{t['supply']:>8.1f} ±{t['supply_se']:<6.1f}{t['vascular_exclusion']:>12.6g} ±"
+              f"{t['vascular_exclusion_se']:<8.2g}{t['wall_seconds']:>7.1f}")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+        import pandas as pd
+
+        pd.DataFrame(table).to_csv(args.out / "table.csv", index=False)
+        figure(table, args.case, args.out / "convergence.png")
+        print(f"written: {args.out}/runs.jsonl, table.csv, convergence.png")
+
+
+if __name__ == "__main__":
+    main()
