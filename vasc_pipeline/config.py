@@ -86,6 +86,7 @@ class AnnealConfig:
     acceptance_target: float = 0.3       # per node class (terminal, bifurcation)
     adapt_window: int = 1000             # proposals of a class between adaptations
     polish: bool = False                 # optimise the final topology's bifurcation positions (geometry.polish)
+    polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (geometry.descend_swaps)
     trace_every: int = 100_000           # steps between trace records
 
 
@@ -184,6 +185,8 @@ def validate(cfg: RunConfig) -> RunConfig:
     if not 0.0 < a.supply_phase <= 1.0:
         raise ConfigError(f"anneal.supply_phase must lie in (0, 1], got {a.supply_phase}")
     _positive("anneal.neighbour_cell", a.neighbour_cell)
+    if not isinstance(a.polish_swaps_max_terminals, int) or a.polish_swaps_max_terminals < 0:
+        raise ConfigError(f"anneal.polish_swaps_max_terminals must be an integer >= 0, got {a.polish_swaps_max_terminals}")
     for name in ("calibration_samples", "adapt_window"):
         if not isinstance(getattr(a, name), int) or getattr(a, name) < 1:
             raise ConfigError(f"anneal.{name} must be an integer >= 1, got {getattr(a, name)}")

@@ -263,12 +263,21 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
     report: dict[str, Any] = {"T_start": float(state.schedule[0]), "T_end": float(state.schedule[1]),
                               "step_terminal": float(state.step_size[0]),
                               "step_bifurcation": float(state.step_size[1])}
-    if problem.config.anneal.polish:
-        from .geometry import polish
+    a = problem.config.anneal
+    if a.polish:
+        from .geometry import descend_swaps, polish
 
+        rng_saved, counters_saved = state.rng.copy(), state.counters.copy()
         result = polish(problem, state)
-        report["polish"] = {"applied": result["applied"], "moved": result["moved"],
-                            "total_before": result["before"]["total"], "total_after": result["after"]["total"]}
+        swaps = descend_swaps(problem, state) if problem.physics.n_terminals <= a.polish_swaps_max_terminals else 0
+        if swaps:
+            polish(problem, state)  # exclusion may leave the new optimum only partly taken
+        state.rng[:], state.counters[:] = rng_saved, counters_saved
+        after = running_costs(problem, state)
+        report["polish"] = {"applied": result["applied"], "moved": result["moved"], "swaps": swaps,
+                            "total_before": result["before"]["total"], "total_after": after["total"],
+                            "vascular_before": result["before"]["volume"] + result["before"]["power"],
+                            "vascular_after": after["volume"] + after["power"]}
     return report
 
 

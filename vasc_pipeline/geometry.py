@@ -551,3 +551,67 @@ def _place_from_children(tree: Tree) -> None:
             node = tree.parent[node]
     bif = np.arange(k + n, tree.n_nodes)
     tree.position[bif] = sums[bif] / tree.n_downstream[bif, None]
+
+
+# --------------------------------------------------------------------------------------
+# Swap descent of small trees
+
+
+def descend_swaps(problem, state: kernel.State, max_rounds: int = 20) -> int:
+    """Single-swap descent with optimal geometry: the end of a small tree's anneal.
+
+    Near the end of an anneal two topologies whose optima differ by little can be
+    separated by a barrier (the geometry of one is poor for the other), and the chain may
+    freeze in the worse. Here every legal swap of two non-inlet nodes is tried with the
+    bifurcations at the swapped topology's optimum (:func:`optimal_bifurcations`); the
+    best one that lowers C_v + C_w is applied if the total annealed cost (less the
+    constant supply term) drops too, and the search repeats until no swap helps. O(N^2)
+    geometry solves a round: meant for trees of a few dozen terminals. Terminals do not
+    move and no random number is drawn. Returns the number of swaps applied.
+    """
+    model, physics = problem.model, problem.physics
+    k, n = physics.n_inlets, physics.n_terminals
+    bounds = problem.tissue.bounds
+    applied = 0
+    kernel.initialise(model, state)
+    for _ in range(max_rounds):
+        current = kernel.scaled_total_without_supply(model, state)
+        parent = state.parent.copy()
+        tree = Tree(parent, state.children.copy(), state.position.copy(), state.n_downstream.copy(), k)
+        vascular = vascular_cost(tree.position, parent, vascular_weights(tree, physics))
+        candidates = []
+        for a in range(k, parent.size):
+            ancestors_a = _ancestors(parent, a)
+            for b in range(a + 1, parent.size):
+                if parent[a] == parent[b] or b in ancestors_a or a in _ancestors(parent, b):
+                    continue
+                trial = parent.copy()
+                trial[a], trial[b] = parent[b], parent[a]
+                t = Tree(trial, children_from_parent(trial), tree.position.copy(), count_terminals(trial, n, k), k)
+                opt = optimal_bifurcations(t, vascular_weights(t, physics), bounds)
+                if opt.cost < vascular * (1.0 - 1e-12):
+                    candidates.append((opt.cost, t, opt.position))
+        improved = False
+        for _, t, position in sorted(candidates, key=lambda c: c[0]):
+            saved = (state.parent.copy(), state.children.copy(), state.n_downstream.copy(), state.position.copy())
+            state.parent[:], state.children[:], state.n_downstream[:] = t.parent, t.children, t.n_downstream
+            state.position[:] = position
+            kernel.initialise(model, state)
+            if kernel.scaled_total_without_supply(model, state) < current:
+                applied += 1
+                improved = True
+                break
+            state.parent[:], state.children[:], state.n_downstream[:], state.position[:] = saved
+            kernel.initialise(model, state)
+        if not improved:
+            break
+    return applied
+
+
+def _ancestors(parent: np.ndarray, i: int) -> set[int]:
+    out = set()
+    x = parent[i]
+    while x >= 0:
+        out.add(int(x))
+        x = parent[x]
+    return out

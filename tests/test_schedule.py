@@ -1,0 +1,213 @@
+"""anneal=fast: calibrated temperatures, adapted steps, neighbour swaps, supply schedule, polish."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vasc_pipeline import config, costs, engine, geometry, job, kernel, sweep
+from vasc_pipeline.config import ConfigError
+from vasc_pipeline.physics import cost_tables
+from vasc_pipeline.store import RunStore
+from vasc_pipeline.tree import check_tree
+
+from helpers import make_problem
+from test_kernel import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full
+
+
+def cells_consistent(problem, state):
+    """Every non-inlet node sits, once, in the list of the cell of its position; links agree."""
+    model = problem.model
+    seen = np.zeros(state.parent.size, dtype=int)
+    for c, head in enumerate(state.cell_head):
+        x, prev = head, -1
+        while x >= 0:
+            assert state.cell_of[x] == c and state.cell_prev[x] == prev
+            seen[x] += 1
+            prev, x = x, state.cell_next[x]
+    k = problem.physics.n_inlets
+    assert np.all(seen[k:] == 1) and np.all(seen[:k] == 0)
+    cxyz = np.clip(np.floor((state.position - model.cell_lo) / model.cell_size).astype(int), 0,
+                   model.cell_shape - 1)
+    expected = (cxyz[:, 2] * model.cell_shape[1] + cxyz[:, 1]) * model.cell_shape[0] + cxyz[:, 0]
+    np.testing.assert_array_equal(state.cell_of[k:], expected[k:])
+
+
+@pytest.mark.parametrize("overrides", [
+    ("tissue=plane2d",),
+    ("tissue=sphere", "n_terminals=120"),
+    ("tissue=heart", "n_terminals=120"),
+], ids=["plane2d", "sphere", "heart"])
+def test_fast_running_sums_equal_full_recomputation_and_cells_follow_the_nodes(overrides):
+    steps = 1_000_000
+    problem = make_problem(*overrides, "anneal=fast", f"anneal.steps={steps}")
+    state = engine.initial_state(problem, seed=5)
+    engine.run_block(problem, state, steps)
+    assert state.counters[kernel.COUNTER_STEP] == steps
+    assert state.counters[kernel.COUNTER_LOCAL_SWAP_PROPOSED] > 0.8 * state.counters[kernel.COUNTER_SWAP_PROPOSED]
+    assert_moves_of_every_kind_accepted_and_rejected(state)
+    assert_running_equals_full(problem, state)
+    cells_consistent(problem, state)
+    # Steps adapted down from their caps as the temperature fell.
+    assert np.all(state.step_size < 0.1 * problem.model.step_max)
+
+
+def test_neighbour_partner_is_uniform_over_the_adjacent_cells_and_symmetric():
+    problem = make_problem("tissue=sphere", "n_terminals=60", "anneal=fast", "anneal.neighbour_cell=1.5")
+    state = engine.initial_state(problem, seed=2)
+    model = problem.model
+    k = problem.physics.n_inlets
+    cell = np.clip(np.floor((state.position - model.cell_lo) / model.cell_size).astype(int), 0, model.cell_shape - 1)
+
+    def neighbours(a):
+        near = np.all(np.abs(cell - cell[a]) <= 1, axis=1)
+        near[:k] = False
+        near[a] = False
+        return set(np.flatnonzero(near))
+
+    rng = np.array(state.rng)
+    for a in range(k, state.parent.size, 7):
+        expected = neighbours(a)
+        assert all(a in neighbours(b) for b in expected)  # the relation is symmetric
+        draws = [kernel.neighbour_partner(model, state, a, rng) for _ in range(200 * max(len(expected), 1))]
+        if not expected:
+            assert set(draws) == {-1}
+            continue
+        values, counts = np.unique(draws, return_counts=True)
+        assert set(values) == expected
+        assert counts.min() > 0.6 * counts.mean()  # uniform: 200 expected draws each
+
+
+def test_calibrated_temperatures_follow_the_cost_scale_and_leave_the_random_stream_alone():
+    problem = make_problem("tissue=plane2d", "anneal=fast", "anneal.steps=1000")
+    a = problem.config.anneal
+    state = engine.initial_state(problem, seed=4)
+    t_start, t_end = state.schedule
+    tables = cost_tables(problem.physics)
+    assert t_end == pytest.approx(a.T_end_rel * (tables.volume[1] + tables.power[1]) * problem.physics.supply_radius)
+    # The run's generator is the one random_tree left: calibration walked a copy.
+    fresh = engine.initial_state(make_problem("tissue=plane2d", "anneal=paper", "anneal.steps=1000"), seed=4)
+    np.testing.assert_array_equal(state.rng, fresh.rng)
+    # On an independent sample of uphill moves from the same tree, acceptance at T_start is near accept_start.
+    walker = engine.restore_state(problem, engine.state_arrays(state))
+    walker.rng[:] = engine.seed_state(99)
+    uphill = np.empty(4000)
+    uphill = uphill[:kernel.sample_uphill(problem.model, walker, 4000, uphill)]
+    assert uphill.size > 500
+    assert np.mean(np.exp(-uphill / t_start)) == pytest.approx(a.accept_start, abs=0.05)
+    assert t_start > 1e3 * t_end
+    # Configured temperatures are kept as they are.
+    kept = engine.initial_state(make_problem("tissue=plane2d", "anneal=fast", "anneal.T_start=1e-3",
+                                             "anneal.T_end=1e-10"), seed=4)
+    np.testing.assert_array_equal(kept.schedule, [1e-3, 1e-10])
+
+
+def test_step_adaptation_by_hand():
+    problem = make_problem("tissue=plane2d", "anneal=fast")
+    model = problem.model
+    state = engine.initial_state(problem, seed=0)
+    c = state.counters
+    width = state.step_size[1] = 0.5 * model.step_max[1]
+    c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] = model.adapt_window - 1
+    c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] = model.adapt_window // 10 - 1
+    kernel._adapt_step(model, state, 1, True)  # the window's last proposal: acceptance 0.1
+    assert state.step_size[1] == pytest.approx(width * math.exp(2 * (0.1 - model.acceptance_target)))
+    assert c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] == c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] == 0
+    c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] = model.adapt_window - 1
+    c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] = model.adapt_window - 1
+    kernel._adapt_step(model, state, 1, True)  # acceptance 1 widens, up to the configured cap
+    kernel._adapt_step(model, state, 1, True)
+    assert state.step_size[1] <= model.step_max[1]
+
+
+def test_supply_weight_follows_its_schedule_then_is_the_true_weight():
+    problem = make_problem("tissue=plane2d", "anneal=fast", "anneal.steps=1000000")
+    model = problem.model
+    state = engine.initial_state(problem, seed=0)
+    rho = problem.physics.supply_radius / problem.tissue.voxel_size
+    assert model.supply_T_start == pytest.approx(problem.config.anneal.supply_T_start * math.pi * rho ** 2)
+    assert model.supply_steps == 500_000
+    temp = 1e-6
+    assert kernel.supply_weight(model, state, temp) == pytest.approx(temp / model.supply_T_start)
+    state.counters[kernel.COUNTER_STEP] = 250_000
+    t_s = math.sqrt(model.supply_T_start * model.supply_T_end)
+    assert kernel.supply_weight(model, state, temp) == pytest.approx(temp / t_s)
+    state.counters[kernel.COUNTER_STEP] = 500_000
+    assert kernel.supply_weight(model, state, temp) == model.w_supply
+    paper = make_problem("tissue=plane2d", "anneal=paper")
+    assert kernel.supply_weight(paper.model, state, temp) == paper.model.w_supply
+
+
+def test_fast_is_deterministic_across_block_splits_and_checkpoint_round_trips():
+    problem = make_problem("tissue=heart", "n_terminals=60", "anneal=fast", "anneal.steps=300000")
+    one = engine.initial_state(problem, seed=8)
+    engine.run_block(problem, one, 300_000)
+    split = engine.initial_state(problem, seed=8)
+    for n in (1, 99_999, 50_000, 123_456):
+        engine.run_block(problem, split, n)
+        split = engine.restore_state(problem, engine.state_arrays(split))  # as a resume would
+    engine.run_block(problem, split, 300_000 - 273_456)
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+
+
+def test_fast_steps_are_exact_and_polish_keeps_the_running_costs_true():
+    cfg = config.compose(["tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=200000",
+                          "anneal.trace_every=50000"])
+    result = engine.run(cfg, seed=1)
+    assert result.steps == 200_000
+    check_tree(result.tree, result.problem.tissue)
+    polish = result.anneal["polish"]
+    assert polish["applied"] in ("full", "partial", "none")
+    for term in ("volume", "power", "exclusion", "total"):
+        assert result.costs[term] == pytest.approx(result.costs_recomputed[term], rel=1e-9)
+    assert result.costs["supply"] == result.costs_recomputed["supply"]
+
+
+def test_the_job_stores_how_the_schedule_ran(tmp_path):
+    cfg = config.compose(["tissue=plane2d", "n_terminals=12", "anneal=fast", "anneal.steps=50000",
+                          "anneal.trace_every=10000", f"output_dir={tmp_path}"])
+    (j,) = sweep.expand(cfg)
+    summary = job.run_job(j)
+    attrs = RunStore.open(j.store, mode="r").attrs
+    report = attrs["anneal"]
+    assert report["T_end"] < report["T_start"]
+    assert report["polish"]["total_after"] <= report["polish"]["total_before"] + 1e-12 * abs(
+        report["polish"]["total_before"])
+    assert summary["cost"] == pytest.approx(summary["cost_recomputed"], rel=1e-9)
+
+
+@pytest.mark.parametrize("override, field", [
+    ("anneal.accept_start=1.5", "anneal.accept_start"),
+    ("anneal.acceptance_target=0", "anneal.acceptance_target"),
+    ("anneal.p_local=-0.1", "anneal.p_local"),
+    ("anneal.neighbour_cell=0", "anneal.neighbour_cell"),
+    ("anneal.adapt_window=0", "anneal.adapt_window"),
+    ("anneal.supply_T_end=10", "anneal.supply_T_end"),
+    ("anneal.supply_phase=0", "anneal.supply_phase"),
+    ("anneal.T_end_rel=-1", "anneal.T_end_rel"),
+])
+def test_bad_fast_settings_name_the_field(override, field):
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        config.compose(["anneal=fast", override])
+
+
+def _fixed_sites(tmp_path, n, seed):
+    rng = np.random.default_rng(seed)
+    sites = np.c_[rng.uniform(0.01, 0.09, (n, 2)), np.zeros(n)]
+    path = tmp_path / f"sites{n}_{seed}.csv"
+    np.savetxt(path, sites, delimiter=",", header="x,y,z", comments="")
+    return path, sites
+
+
+@pytest.mark.parametrize("n", [4, 5, pytest.param(6, marks=pytest.mark.slow)])
+def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
+    path, sites = _fixed_sites(tmp_path, n, seed=n)
+    overrides = ["tissue=plane2d", f"n_terminals={n}", f"terminals.path={path}", "terminals.fixed=true",
+                 "anneal=fast", "anneal.steps=200000"]
+    problem = make_problem(*overrides)
+    best, _, _ = geometry.best_topology(problem.tissue.inlets[0], sites, problem.physics, problem.tissue.bounds)
+    for seed in range(4):
+        result = engine.run(config.compose(overrides), seed=seed)
+        c = result.costs_recomputed
+        assert (c["volume"] + c["power"]) == pytest.approx(best, rel=1e-6), seed
