@@ -30,8 +30,8 @@ CASES = {
                 "paper": [1_000_000, 10_000_000, 100_000_000],
                 "fast": [10_000, 100_000, 1_000_000, 10_000_000]},
     "heart": {"overrides": ["tissue=heart", "n_terminals=1000"], "seeds": 4,
-              "paper": [10_000_000, 30_000_000],
-              "fast": [300_000, 1_000_000, 3_000_000, 10_000_000]},
+              "paper": [3_000_000, 10_000_000],
+              "fast": [100_000, 300_000, 1_000_000, 3_000_000]},
 }
 SCHEDULES = {"paper": ["anneal=paper"], "paper_cold": ["anneal=paper", "anneal.T_end=1e-9"], "fast": ["anneal=fast"]}
 

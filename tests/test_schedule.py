@@ -204,7 +204,7 @@ def _fixed_sites(tmp_path, n, seed):
 def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
     path, sites = _fixed_sites(tmp_path, n, seed=n)
     overrides = ["tissue=plane2d", f"n_terminals={n}", f"terminals.path={path}", "terminals.fixed=true",
-                 "anneal=fast", "anneal.steps=200000"]
+                 "anneal=fast", "anneal.steps=1000000"]
     problem = make_problem(*overrides)
     best, _, _ = geometry.best_topology(problem.tissue.inlets[0], sites, problem.physics, problem.tissue.bounds)
     for seed in range(4):

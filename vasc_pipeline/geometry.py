@@ -127,9 +127,15 @@ class _Contraction:
         self.b = top[parent[seg]]
 
 
-def _spread(x: np.ndarray, top: np.ndarray) -> None:
-    """Every node takes its cluster's (top node's) position."""
-    x[:] = x[top]
+def _spread(x: np.ndarray, con: _Contraction) -> None:
+    """Every node takes its cluster's position: the fixed member's if it has one, else the top node's.
+
+    A fixed cluster's top may be a bifurcation above its inlet or terminal (contracted
+    while still a little apart); the fixed node must not move to it.
+    """
+    fixed = np.flatnonzero(con.fixed_node)
+    x[con.top[fixed]] = x[fixed]
+    x[:] = x[con.top]
 
 
 # --------------------------------------------------------------------------------------
@@ -224,12 +230,28 @@ def _weiszfeld(x, parent, w, free, levels, depth, scale, iterations):
     return x, iterations
 
 
-def _newton(x, con, w, dim, scale, collapse_tol, max_iter):
-    """Damped Newton on the contracted objective. Returns (x, iterations, newly collapsed segments)."""
+def _newton(x, con, w, dim, scale, collapse_tol, max_iter, stall=20):
+    """Damped Newton on the contracted objective. Returns (x, iterations, segments to contract).
+
+    On a smooth problem Newton converges in a few iterations from the Weiszfeld start. A
+    segment heading for zero length (a kink of the objective) is approached only
+    linearly, and once it is short its w/L curvature spoils the Newton direction: then
+    the line search fails or ``stall`` iterations pass without convergence, and the
+    shortest segment touching a free cluster is returned for contraction (the caller's
+    optimality check reopens it if the optimum is not there).
+    """
+    movable = (con.var[con.a] >= 0) | (con.var[con.b] >= 0)  # two fixed nodes may never merge
+
+    def shortest():
+        length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
+        return con.seg[movable][[np.argmin(length[movable])]]
+
     f = _objective(x, con, w)
     for it in range(max_iter):
         if con.free.size == 0:
             return x, it, None
+        if it >= stall:
+            return x, it, shortest()
         g, hess = _gradient_hessian(x, con, w, dim)
         step = _solve_spd(hess, -g)
         slope = float(g @ step)
@@ -244,12 +266,11 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter):
             if f_trial <= f + 1e-4 * t * slope:
                 break
             t *= 0.5
-            if t < 1e-12:  # no decrease representable: converged to rounding
-                return x, it, None
+            if t < 1e-12:  # no decrease even for a tiny step: a kink is within reach
+                return x, it, shortest()
         x, f = trial, f_trial
         length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
-        # Only segments touching a free cluster: two fixed nodes may never merge.
-        short = (length < collapse_tol * scale) & ((con.var[con.a] >= 0) | (con.var[con.b] >= 0))
+        short = (length < collapse_tol * scale) & movable
         if np.any(short):
             return x, it + 1, con.seg[short]
     return x, max_iter, None
@@ -342,9 +363,9 @@ def optimal_bifurcations(tree: Tree, weights: np.ndarray, bounds: tuple[np.ndarr
         converged = False
         for _ in range(max_rounds):
             con = _Contraction(parent, levels, depth, fixed, collapsed)
-            _spread(x, con.top)
+            _spread(x, con)
             x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton)
-            _spread(x, con.top)  # Newton moves only the clusters' top nodes
+            _spread(x, con)  # Newton moves only the clusters' top nodes
             iterations += its
             if short is not None:
                 candidate = collapsed.copy()
