@@ -46,7 +46,7 @@ def main() -> None:
     parser.add_argument("--moves", type=int, default=200_000)
     parser.add_argument("--warmup", type=int, default=20_000)
     args = parser.parse_args()
-    problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={args.n_terminals}"]))
+    problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={args.n_terminals}", "anneal=paper"]))
     base = engine.initial_state(problem, seed=0)
     engine.run_block(problem, base, 1000)  # compile outside the timing
     m = problem.model

@@ -1,9 +1,9 @@
 """Final cost against proposed moves: ``anneal=fast`` against the paper's schedule.
 
 Runs every (schedule, moves, seed) of a case with :func:`vasc_pipeline.engine.run` in a
-process pool, prints one JSON line per run, then a table of mean ± standard error per
-(schedule, moves), and writes ``runs.jsonl``, ``table.csv`` and ``convergence.png`` to
-``--out``. Schedules: ``paper`` (the literal T 1e10 -> 1e-5), ``paper_cold`` (the same
+process pool, prints one JSON line per run (appended to ``--out``/runs.jsonl, and runs
+already there are not run again: an interrupted benchmark resumes), then a table of mean ±
+standard error per (schedule, moves), and writes ``table.csv`` and ``convergence.png``. Schedules: ``paper`` (the literal T 1e10 -> 1e-5), ``paper_cold`` (the same
 shape ended at T = 1e-9 W) and ``fast``.
 
 The annealed total C is A_s/A_wv C_s + (C_v + C_w) + A_o/A_wv C_o with A_s/A_wv = 1e26, so
@@ -27,11 +27,11 @@ import numpy as np
 CASES = {
     # The paper's 2-D convergence test (tissue=plane2d sets 64 terminals, gamma 3, 2.4 mm root).
     "plane2d": {"overrides": ["tissue=plane2d"], "seeds": 8,
-                "paper": [1_000_000, 10_000_000, 100_000_000],
-                "fast": [10_000, 100_000, 1_000_000, 10_000_000]},
+                "steps": {"paper": [1_000_000, 10_000_000, 100_000_000], "paper_cold": [1_000_000, 10_000_000],
+                          "fast": [10_000, 100_000, 1_000_000, 10_000_000]}},
     "heart": {"overrides": ["tissue=heart", "n_terminals=1000"], "seeds": 4,
-              "paper": [3_000_000, 10_000_000],
-              "fast": [100_000, 300_000, 1_000_000, 3_000_000]},
+              "steps": {"paper": [3_000_000, 10_000_000], "paper_cold": [3_000_000, 10_000_000],
+                        "fast": [100_000, 300_000, 1_000_000, 3_000_000]}},
 }
 SCHEDULES = {"paper": ["anneal=paper"], "paper_cold": ["anneal=paper", "anneal.T_end=1e-9"], "fast": ["anneal=fast"]}
 
@@ -101,13 +101,23 @@ def main() -> None:
     case = CASES[args.case]
     seeds = range(args.seeds or case["seeds"])
     tasks = [(args.case, case["overrides"], schedule, steps, seed)
-             for schedule in SCHEDULES for steps in case["fast" if schedule == "fast" else "paper"] for seed in seeds]
+             for schedule, all_steps in case["steps"].items() for steps in all_steps for seed in seeds]
+    rows, done = [], set()
+    runs_file = args.out / "runs.jsonl" if args.out else None
+    if runs_file is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        if runs_file.exists():
+            rows = [r for r in map(json.loads, runs_file.read_text().splitlines()) if r["seed"] in seeds]
+            done = {(r["schedule"], r["steps"], r["seed"]) for r in rows}
+    tasks = [t for t in tasks if (t[2], t[3], t[4]) not in done]
     tasks.sort(key=lambda t: -t[3])  # longest first: the pool finishes together
-    rows = []
     with ProcessPoolExecutor(args.workers) as pool:
         for row in pool.map(one_run, tasks):
             rows.append(row)
             print(json.dumps(row), flush=True)
+            if runs_file is not None:
+                with runs_file.open("a") as f:
+                    f.write(json.dumps(row) + "\n")
     table = summarise(rows)
     print(f"\n{args.case}: mean ± SE over {len(seeds)} seeds (total = annealed C [W]; supply = C_s; "
           "rest = C_v + C_w + A_o/A_wv C_o [W])")
@@ -117,13 +127,11 @@ def main() -> None:
               f"{t['supply']:>8.1f} ±{t['supply_se']:<6.1f}{t['vascular_exclusion']:>12.6g} ±"
               f"{t['vascular_exclusion_se']:<8.2g}{t['wall_seconds']:>7.1f}")
     if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
         import pandas as pd
 
         pd.DataFrame(table).to_csv(args.out / "table.csv", index=False)
         figure(table, args.case, args.out / "convergence.png")
-        print(f"written: {args.out}/runs.jsonl, table.csv, convergence.png")
+        print(f"written: {runs_file}, {args.out}/table.csv, {args.out}/convergence.png")
 
 
 if __name__ == "__main__":

@@ -259,11 +259,11 @@ def _bad(cfg: config.RunConfig, **changes) -> config.RunConfig:
     ({"physics__m_b": -641.3, "sweep": None}, r"physics\.m_b must be a finite number > 0"),
     ({"anneal__steps": 0}, r"anneal\.steps must be an integer >= 1"),
     ({"sweep__steps": [-5]}, r"sweep\.steps\[0\] must be an integer >= 1"),
-    ({"anneal__T_end": 1e12}, r"anneal\.T_end must be < anneal\.T_start"),
+    ({"anneal__T_start": 1.0, "anneal__T_end": 1e12}, r"anneal\.T_end must be < anneal\.T_start"),
     ({"tissue__name": "liver"}, r"tissue\.name: unknown tissue 'liver'; accepted: box, heart, mask"),
     ({"tissue__name": "mask", "tissue__path": "/nonexistent/mask.npy", "tissue__voxel_size": 1e-3,
       "tissue__inlets": [[0.0, 0.0, 0.0]]}, r"tissue\.path: mask file '/nonexistent/mask\.npy' does not exist"),
-    ({"anneal__T_end": 1e-8}, r"never mixed: anneal\.T_end: 1e-05 \(stored\) vs 1e-08 \(requested\)"),
+    ({"anneal__T_end": 1e-8}, r"never mixed: anneal\.T_end: None \(stored\) vs 1e-08 \(requested\)"),
     ({"sweep__seeds": [0, 1], "physics__viscosity": 4e-3}, r"physics\.viscosity: 0\.0036 \(stored\) vs 0\.004"),
 ])
 def test_bad_input_exits_non_zero_naming_the_field_and_touches_no_result(finished_output, changes, message):
