@@ -181,10 +181,15 @@ def _gradient_hessian(x, con, w, dim, with_hessian=True):
     return g.ravel(), hess
 
 
-def _solve_spd(hess, rhs):
+def _solve_spd(hess, rhs, scale):
     """Solve a tree-structured SPD system in its given (children-first) order: no fill-in."""
     n = hess.shape[0]
     diag = hess.diagonal()
+    if n and float(np.max(diag)) <= 0.0:
+        # Every segment lies along one line (fixed nodes collinear): the objective is
+        # piecewise linear, without curvature. Step along the descent direction, length
+        # ``scale``; the line search shortens it and the kinks are then contracted.
+        return rhs * (scale / max(float(np.linalg.norm(rhs)), 1e-300))
     # A tiny ridge guards the exactly singular cases (all segments at a node collinear).
     ridge = 1e-13 * float(np.max(diag)) if n else 0.0
     a = (hess + sp.diags(np.full(n, ridge))).tocsc()
@@ -253,7 +258,7 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, stall=20):
         if it >= stall:
             return x, it, shortest()
         g, hess = _gradient_hessian(x, con, w, dim)
-        step = _solve_spd(hess, -g)
+        step = _solve_spd(hess, -g, scale)
         slope = float(g @ step)
         if -slope <= 1e-15 * f:  # Newton decrement: the remaining decrease is below rounding
             return x, it, None
