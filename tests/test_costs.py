@@ -121,3 +121,58 @@ def test_kernel_pressures_match_numpy():
     assert state.costs[kernel.PRESSURE] == pytest.approx(c_p, rel=1e-12)
     # Terminals see lower pressure than the inlet, deeper ones lower still.
     assert np.all(p_ref[k:k + n] < problem.physics.pressure_inlet)
+
+
+def _hollow_block(n=20, wall=6):
+    """A block of tissue around a cubic cavity that is part of the exclusion domain."""
+    mask = np.zeros((n, n, n), dtype=np.uint8)
+    mask[2:-2, 2:-2, 2:-2] = 1
+    cavity = np.zeros_like(mask)
+    cavity[wall:-wall, wall:-wall, wall:-wall] = 1
+    mask[cavity == 1] = 0
+    return tissue.Tissue("block", mask, 1e-3, [0.0, 0.0, 0.0], [[0.0, 0.0, 0.0]], exclusion=cavity)
+
+
+def test_cavity_share_is_the_large_vessels_length_inside_cavities():
+    t = _hollow_block()
+    assert t.cavity.sum() == 8**3 and np.all(t.exclusion >= t.mask)
+    # the distance map sees the cavity as inside: deepest at the block's centre, not at the wall's
+    assert t.distance[10, 10, 10] == t.distance.max() == 8.0
+    h = t.voxel_size
+    # node 0 inlet; node 1: a large vessel along x through the cavity (x = 1 .. 18 voxels, 8 inside);
+    # node 2: a large vessel outside it; node 3: a small vessel through the cavity (not counted),
+    # hanging from node 4, a small vessel outside it
+    position = np.array([[1.0, 10.0, 10.0], [18.0, 10.0, 10.0], [1.0, 1.0, 1.0], [10.0, 3.0, 10.0],
+                         [10.0, 17.0, 17.0]]) * h
+    parent = np.array([-1, 0, 0, 4, 2])
+    radius = np.array([0.0, 1e-3, 1e-3, 1e-4, 1e-4])
+    share = costs.cavity_share(parent, position, radius, t)
+    assert share == pytest.approx(8.0 / (17.0 + 9.0 * math.sqrt(2.0)), rel=1e-12)
+    # node 3 large too: x = 10, y 3 .. 17, z 10 .. 17 crosses the cavity (y, z in [5.5, 13.5]) for
+    # y in [5.5, 13.5] while z = 10 + (y - 3) / 2 <= 13.5, i.e. y <= 10: a t-range of (10 - 5.5) / 14
+    radius[3] = 1e-3
+    length3 = math.hypot(14.0, 7.0)
+    assert costs.cavity_share(parent, position, radius, t) == pytest.approx(
+        (8.0 + 4.5 / 14.0 * length3) / (17.0 + 9.0 * math.sqrt(2.0) + length3), rel=1e-12)
+    no_cavity = tissue.Tissue("block", t.mask, h, t.origin, t.inlets)
+    assert math.isnan(costs.cavity_share(parent, position, radius, no_cavity))
+
+
+def test_mask_tissue_takes_a_second_mask_for_its_exclusion_domain(tmp_path):
+    t = _hollow_block()
+    np.save(tmp_path / "tissue.npy", t.mask)
+    np.save(tmp_path / "cavity.npy", t.cavity.astype(np.uint8) * 7)  # any nonzero value
+    common = dict(voxel_size=1e-3, origin=[0.0, 0.0, 0.0], inlets=[[0.0, 0.0, 0.0]])
+    loaded = tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"),
+                                 exclusion_path=str(tmp_path / "cavity.npy"), **common)
+    np.testing.assert_array_equal(loaded.exclusion, t.exclusion)
+    np.testing.assert_array_equal(loaded.distance, t.distance)
+    plain = tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), **common)
+    np.testing.assert_array_equal(plain.exclusion, plain.mask)
+    np.save(tmp_path / "wrong.npy", np.ones((4, 4, 4), dtype=np.uint8))
+    with pytest.raises(tissue.TissueError, match=r"tissue\.exclusion_path: .*shape \(4, 4, 4\)"):
+        tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "wrong.npy"),
+                            **common)
+    with pytest.raises(tissue.TissueError, match=r"tissue\.exclusion_path: mask file .* does not exist"):
+        tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "no.npy"),
+                            **common)

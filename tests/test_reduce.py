@@ -296,3 +296,16 @@ def test_stage_reduce_on_the_command_line(swept, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={tmp_path / 'x'}"],
                           env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and "nothing to reduce" in proc.stderr
+
+
+def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary):
+    assert np.isnan(summary["costs"]["cavity_share"].values).all()  # spheres have no cavity
+    jobs = run_all(tmp_path, "n_terminals=16", "anneal.steps=20000", "anneal.trace_every=10000",
+                   "+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
+                   "tissue=heart")
+    result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    shares = result.summary["costs"]["cavity_share"]
+    for j in jobs:
+        stored = store.RunStore.open(j.store, mode="r").attrs["statistics"]["cavity_share"]
+        assert 0.0 <= stored <= 1.0
+        assert float(shares.sel(n_terminals=16, m_b=641.3, seed=j.coords["seed"])) == stored

@@ -194,6 +194,9 @@ def test_job_writes_the_documented_layout(tmp_path):
     assert mask.dtype == np.uint8 and mask.attrs["voxel_size"] == ref.problem.tissue.voxel_size
     assert mask.attrs["origin"] == list(ref.problem.tissue.origin)
     assert s.group["tissue/distance"].dtype == np.float32
+    np.testing.assert_array_equal(s.group["tissue/exclusion"][...], ref.problem.tissue.exclusion)
+    np.testing.assert_array_equal(s.group["tissue/distance"][...], ref.problem.tissue.distance)
+    assert a["statistics"] == ref.statistics == {}  # plane2d has no cavity
     ds = xr.open_zarr(j.store, group="trace")
     np.testing.assert_array_equal(ds["step"].values, ref.trace["step"])
     np.testing.assert_array_equal(ds["total"].values, ref.trace["total"])

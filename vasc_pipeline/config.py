@@ -39,10 +39,13 @@ class TissueConfig:
     side: float = 0.1                    # plane2d square side, m
     mass_g: float = 218.0                # heart: myocardial mass, g
     density: float = 1.06e3              # heart: myocardial density, kg m^-3
+    exclude_cavities: bool = True        # heart: large vessels also kept out of the ventricular cavities
     path: Optional[str] = None           # mask: .npy file or Zarr array
     array: Optional[str] = None          # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
     inlets: Optional[list[list[float]]] = None  # mask: inlet positions, m
+    exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
+    exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
 
 
 @dataclass

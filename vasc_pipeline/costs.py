@@ -18,7 +18,7 @@ from .tissue import Tissue
 from .tree import Tree
 
 __all__ = ["COST_TERMS", "ActiveTerms", "active_terms", "segment_lengths", "voxel_pieces", "exclusion_sum",
-           "supply_counts", "supply_cost", "node_pressures", "full_costs", "total_cost"]
+           "cavity_share", "LARGE_VESSEL_FRACTION", "supply_counts", "supply_cost", "node_pressures", "full_costs", "total_cost"]
 
 COST_TERMS = ("volume", "power", "supply", "exclusion", "pressure")
 
@@ -84,6 +84,44 @@ def exclusion_sum(p0: np.ndarray, p1: np.ndarray, tissue: Tissue) -> float:
     idx, pieces = voxel_pieces(u0, u1, tissue.shape)
     depth = tissue.distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64)
     return float(np.sum((depth * pieces) ** 6))
+
+
+# Vessels with r >= this fraction of the tree's largest radius count as "large" in
+# cavity_share (the fidelity issue's definition).
+LARGE_VESSEL_FRACTION = 0.25
+
+
+def cavity_share(parent: np.ndarray, position: np.ndarray, radius: np.ndarray, tissue: Tissue,
+                 large_fraction: float = LARGE_VESSEL_FRACTION) -> float:
+    """Share of the length of the large vessels that lies in the tissue's cavities.
+
+    Cavities are the voxels of the exclusion domain outside the tissue (the heart's
+    ventricles, :attr:`Tissue.cavity`); large vessels are the segments with radius
+    >= ``large_fraction`` times the largest. Lengths per voxel come from the exact
+    traversal the exclusion term uses, so the share is exact for the voxelised domains.
+    Returns NaN when the tissue has no cavity or the tree no segment.
+
+    Parameters
+    ----------
+    parent : int64 (node,), -1 at inlets
+    position : float64 (node, 3), m
+    radius : float64 (node,), m; radius of the segment ending at each node
+    tissue : Tissue
+    """
+    cavity = tissue.cavity
+    seg = np.flatnonzero(np.asarray(parent) >= 0)
+    if not cavity.any() or seg.size == 0:
+        return math.nan
+    radius = np.asarray(radius, dtype=np.float64)
+    large = seg[radius[seg] >= large_fraction * radius[seg].max()]
+    inside = total = 0.0
+    for i in large:
+        u0 = (position[i] - tissue.origin) / tissue.voxel_size
+        u1 = (position[parent[i]] - tissue.origin) / tissue.voxel_size
+        idx, pieces = voxel_pieces(u0, u1, tissue.shape)
+        total += float(np.linalg.norm(u1 - u0))
+        inside += float(pieces[cavity[idx[:, 0], idx[:, 1], idx[:, 2]]].sum())
+    return inside / total if total > 0 else math.nan
 
 
 def supply_counts(terminals: np.ndarray, tissue: Tissue, supply_radius: float) -> np.ndarray:

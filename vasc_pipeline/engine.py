@@ -22,14 +22,14 @@ import numpy as np
 
 from . import kernel
 from .config import ConfigError, RunConfig, scheduled_steps, to_run_config, validate
-from .costs import COST_TERMS, ActiveTerms, active_terms, full_costs
+from .costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, full_costs
 from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
 from .tissue import Tissue, build_tissue
 from .tree import Tree, TreeError, load_terminal_sites, random_tree
 
 __all__ = ["Problem", "RunResult", "build_problem", "initial_state", "calibrate_schedule", "run_block", "finish",
-           "running_costs", "tree_of", "state_arrays", "restore_state", "run", "CHECKPOINT_FIELDS"]
+           "running_costs", "tree_of", "tree_statistics", "state_arrays", "restore_state", "run", "CHECKPOINT_FIELDS"]
 
 # State fields saved in a checkpoint (everything but scratch space).
 CHECKPOINT_FIELDS = tuple(f for f in kernel.State._fields if not f.startswith("scratch_"))
@@ -62,6 +62,7 @@ class RunResult:
     trace: dict[str, np.ndarray] = field(repr=False)
     counters: np.ndarray = field(repr=False)
     anneal: dict[str, Any] = field(default_factory=dict)  # schedule as run, final step sizes, polish report
+    statistics: dict[str, float] = field(default_factory=dict)  # tree_statistics of the final tree
 
     @property
     def radius(self) -> np.ndarray:
@@ -208,6 +209,19 @@ def tree_of(problem: Problem, state: kernel.State) -> Tree:
                 problem.physics.n_inlets)
 
 
+def tree_statistics(problem: Problem, tree: Tree) -> dict[str, float]:
+    """Diagnostics of a final tree stored with the run (attrs ``statistics``).
+
+    ``cavity_share``: the share of the length of the large vessels (r >= r_max/4) inside
+    the tissue's cavities (:func:`vasc_pipeline.costs.cavity_share`); only for tissues
+    whose exclusion domain has cavities (the heart).
+    """
+    if not problem.tissue.cavity.any():
+        return {}
+    share = cavity_share(tree.parent, tree.position, node_radii(tree, problem.physics), problem.tissue)
+    return {"cavity_share": share}
+
+
 def state_arrays(state: kernel.State) -> dict[str, np.ndarray]:
     """Copies of the state arrays a checkpoint must hold (no scratch space)."""
     return {name: getattr(state, name).copy() for name in CHECKPOINT_FIELDS}
@@ -310,4 +324,5 @@ def run(config: Any, seed: int | None = None, *, block_steps: int | None = None,
         tree=tree, problem=problem, seed=seed, costs=running_costs(problem, state),
         costs_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
         steps=int(state.counters[kernel.COUNTER_STEP]), wall_seconds=time.perf_counter() - start,
-        trace=trace.arrays(), counters=state.counters.copy(), anneal=report)
+        trace=trace.arrays(), counters=state.counters.copy(), anneal=report,
+        statistics=tree_statistics(problem, tree))

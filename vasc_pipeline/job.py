@@ -141,7 +141,7 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
             kind=tree.kind, physics=problem.physics.as_attrs(), cost=engine.running_costs(problem, state),
             cost_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
             steps_done=int(state.counters[kernel.COUNTER_STEP]), trace_length=trace_length, wall_seconds=wall(),
-            anneal=report)
+            anneal=report, statistics=engine.tree_statistics(problem, tree))
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(job, store, "complete", resumed_from, session_steps, time.perf_counter() - started, seen,
                         time.process_time() - cpu_started)

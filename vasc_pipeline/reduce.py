@@ -22,7 +22,8 @@ scalar coordinate). Groups:
 - ``/asymmetry``    (cell..., scheme, order): D_s/D_p and D_l/D_p by parent order, and
   ``symmetric_ratio`` = 2^(-1/gamma) per cell.
 - ``/costs``        (cell..., seed): final costs (annealed total and every unscaled term),
-  steps, wall time and run id of every complete run; ``is_best``.
+  steps, wall time and run id of every complete run; ``is_best``; ``cavity_share`` (the
+  heart: share of the large vessels' length inside the ventricular cavities).
 - ``/traces``       (cell..., seed, record): the cost traces of all complete runs,
   NaN-padded to the longest.
 - ``/kassab``       (artery, level, order): :func:`vasc_pipeline.reference.kassab_dataset`.
@@ -94,6 +95,7 @@ class RunInfo:
     wall_seconds: float
     cost: dict[str, float]
     physics: dict[str, Any]
+    statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -163,7 +165,8 @@ def find_runs(output_dir: str | os.PathLike) -> tuple[list[RunInfo], dict[str, s
             m_b=float(coords.get("m_b", config.get("physics", {}).get("m_b"))), seed=int(attrs["seed"]),
             steps=None if coords.get("steps") is None else int(coords["steps"]),
             steps_done=int(attrs.get("steps_done", 0)), wall_seconds=_float(attrs.get("wall_seconds")),
-            cost=cost, physics=dict(attrs.get("physics") or {})))
+            cost=cost, physics=dict(attrs.get("physics") or {}),
+            statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()}))
     return sorted(runs, key=lambda r: r.run_id), skipped
 
 
@@ -415,10 +418,12 @@ def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
     wall = np.full(shape, np.nan)
     run_id = np.full(shape, "", dtype=object)
     is_best = np.zeros(shape, dtype=np.int8)
+    cavity = np.full(shape, np.nan)
     for r in runs:
         at = tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (sindex[r.seed],)
         for k in _COST_KEYS:
             values[k][at] = r.cost[k]
+        cavity[at] = r.statistics.get("cavity_share", np.nan)
         steps_done[at], wall[at], run_id[at] = r.steps_done, r.wall_seconds, r.run_id
         is_best[at] = best[r.cell(dims)] is r
     full = dims + ["seed"]
@@ -430,6 +435,9 @@ def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
     data["wall_seconds"] = (full, wall, {"units": "s", "long_name": "wall-clock time of the run, all sessions"})
     data["run_id"] = (full, run_id, {"long_name": "run id (empty: no complete run)"})
     data["is_best"] = (full, is_best, {"units": "1", "long_name": "1 for the lowest-cost run of the cell"})
+    data["cavity_share"] = (full, cavity, {
+        "units": "1", "long_name": "share of the large vessels' length (r >= r_max/4) inside the tissue's cavities "
+                                   "(NaN: no cavity, e.g. not the heart)"})
     coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
     coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
     return xr.Dataset(data, coords=coords, attrs={"title": "Final costs of every complete run"})

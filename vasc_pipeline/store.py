@@ -9,7 +9,7 @@ Layout (SPEC section 7)::
                the current checkpoint group), trace_length (committed trace records),
                resumes (one {step, checkpoint} per resumed session), format
         tree/{parent, position, radius, kind}       final tree (complete runs)
-        tissue/{mask, distance}                     the voxelised tissue, written at start
+        tissue/{mask, exclusion, distance}          the voxelised tissue, written at start
         trace/{step, temperature, volume, ..., total, acceptance}   dim "step"
         checkpoints/c<seq>/<state field>            kernel state (engine.state_arrays)
 
@@ -255,7 +255,11 @@ class RunStore:
         self.write_tissue(tissue)
 
     def write_tissue(self, tissue) -> None:
-        """``tissue/mask`` (uint8) and ``tissue/distance`` (float32, voxel units), dims (z, y, x)."""
+        """``tissue/mask`` and ``tissue/exclusion`` (uint8) and ``tissue/distance`` (float32, voxel units).
+
+        ``distance`` is the map the exclusion term used: the distance transform of the
+        exclusion domain (the tissue plus, for the heart, the ventricular cavities). Dims (z, y, x).
+        """
         attrs = {"voxel_size": float(tissue.voxel_size), "origin": [float(v) for v in tissue.origin],
                  "units_voxel_size": "m", "name": tissue.name, "ndim": int(tissue.ndim)}
         group = self.group.require_group("tissue")
@@ -265,10 +269,15 @@ class RunStore:
                                   dimension_names=dims, overwrite=True,
                                   attributes={**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"})
         mask[...] = tissue.mask
+        excl = group.create_array("exclusion", shape=tissue.exclusion.shape, dtype="uint8",
+                                  chunks=tissue.exclusion.shape, dimension_names=dims, overwrite=True,
+                                  attributes={"long_name": "exclusion domain of large vessels (1 = excluded: "
+                                                           "tissue and cavities)", "units": "1"})
+        excl[...] = tissue.exclusion
         dist = group.create_array("distance", shape=tissue.distance.shape, dtype="float32",
                                   chunks=tissue.distance.shape, dimension_names=dims, overwrite=True,
-                                  attributes={"long_name": "distance to the nearest non-tissue voxel",
-                                              "units": "voxel"})
+                                  attributes={"long_name": "distance to the nearest voxel outside the exclusion "
+                                                           "domain", "units": "voxel"})
         dist[...] = tissue.distance
 
     def has_tissue(self) -> bool:
@@ -402,10 +411,12 @@ class RunStore:
     def write_final(self, *, parent: np.ndarray, position: np.ndarray, radius: np.ndarray, kind: np.ndarray,
                     physics: Mapping[str, Any], cost: Mapping[str, float], cost_recomputed: Mapping[str, float],
                     steps_done: int, trace_length: int, wall_seconds: float,
-                    anneal: Mapping[str, Any] | None = None) -> None:
+                    anneal: Mapping[str, Any] | None = None, statistics: Mapping[str, Any] | None = None) -> None:
         """Write the final tree, then mark the run complete in one attribute write, then tidy up.
 
-        ``anneal``: how the schedule ran (:func:`vasc_pipeline.engine.finish`), stored as attrs["anneal"].
+        ``anneal``: how the schedule ran (:func:`vasc_pipeline.engine.finish`), stored as attrs["anneal"];
+        ``statistics``: diagnostics of the final tree (:func:`vasc_pipeline.engine.tree_statistics`),
+        attrs["statistics"].
         """
         group = self.group.require_group("tree")
         specs = (("parent", parent, "int64", ["node"], "parent node (-1 at inlets)", "1"),
@@ -419,7 +430,8 @@ class RunStore:
             arr[...] = data
         self._set_attrs(status=STATUS_COMPLETE, checkpoint=None, steps_done=int(steps_done),
                         trace_length=int(trace_length), wall_seconds=float(wall_seconds), physics=dict(physics),
-                        cost=dict(cost), cost_recomputed=dict(cost_recomputed), anneal=dict(anneal or {}))
+                        cost=dict(cost), cost_recomputed=dict(cost_recomputed), anneal=dict(anneal or {}),
+                        statistics=dict(statistics or {}))
         self.tidy()
 
     def tidy(self) -> None:

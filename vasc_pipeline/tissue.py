@@ -1,8 +1,10 @@
 """Tissue domains as voxel grids (SPEC section 3).
 
 A :class:`Tissue` is a binary voxel mask (z, y, x) with isotropic voxels, the position of
-the centre of voxel [0, 0, 0], the Euclidean distance transform of the tissue (scipy),
-and the inlet positions. Builders return one for each named domain: ``sphere``, ``box``,
+the centre of voxel [0, 0, 0], the inlet positions and its exclusion domain: the voxels
+large vessels must not penetrate (the tissue itself plus, for the heart, the ventricular
+cavities), with that domain's Euclidean distance transform (scipy), the map the
+exclusion term uses. Builders return one for each named domain: ``sphere``, ``box``,
 ``plane2d``, ``heart`` (see :mod:`vasc_pipeline.heart`) and ``mask`` (a user's array).
 
 The grid always extends beyond the tissue (at least one voxel, and a margin where large
@@ -49,9 +51,18 @@ class Tissue:
     ndim : int
         3, or 2 for a single voxel layer at z = origin[2] (all nodes stay in that plane).
     inlet_names : tuple of str
+    exclusion : uint8 ndarray (nz, ny, nx), optional
+        1 = large vessels excluded (SPEC section 2, C_o). Given: the tissue plus these
+        voxels (e.g. cavities, which supply nothing but must not be crossed); default: the
+        tissue only.
+    open_boundary : bool ndarray (nz, ny, nx), optional
+        Voxels outside the exclusion domain that are not part of its surface: the distance
+        map looks through them (and past the grid's edge where they touch it). The heart's
+        cavity openings above the base plane, so that the plane closing a ventricle is as
+        deep as the cavity it closes, not a surface to run along.
     distance : float32 ndarray (nz, ny, nx)
-        Distance of each tissue voxel to the nearest non-tissue voxel, in voxel units
-        (0 outside tissue).
+        Distance of each voxel of the exclusion domain to the nearest voxel of its surface
+        (outside it and not open), in voxel units (0 outside the domain).
     """
 
     name: str
@@ -61,6 +72,8 @@ class Tissue:
     inlets: np.ndarray
     ndim: int = 3
     inlet_names: tuple[str, ...] = ()
+    exclusion: np.ndarray | None = field(default=None, repr=False)
+    open_boundary: np.ndarray | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -85,16 +98,36 @@ class Tissue:
                 raise TissueError(
                     f"inlet {k} ({self.inlet_names[k]}) at {p.tolist()} m lies outside the voxel grid "
                     f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid")
-        # Distance to the nearest non-tissue voxel. The builders pad the grid, but a
-        # user's mask may touch its edge: pad here so the grid edge counts as outside.
-        padded = np.pad(self.mask, 1) if self.ndim == 3 else np.pad(self.mask, ((0, 0), (1, 1), (1, 1)))
-        dist = ndimage.distance_transform_edt(padded)
-        self.distance = np.ascontiguousarray(
-            dist[1:-1, 1:-1, 1:-1] if self.ndim == 3 else dist[:, 1:-1, 1:-1], dtype=np.float32)
+        if self.exclusion is None:
+            self.exclusion = self.mask.copy()
+        else:
+            extra = np.asarray(self.exclusion)
+            if extra.shape != self.mask.shape:
+                raise TissueError(f"tissue '{self.name}': the exclusion mask has shape {extra.shape}, the tissue "
+                                  f"mask {self.mask.shape}; they must be the same grid")
+            self.exclusion = (self.mask | (extra != 0)).astype(np.uint8)
+        # Distance to the nearest voxel outside the exclusion domain. The builders pad the
+        # grid, but a user's mask may touch its edge: pad here so the grid edge counts as
+        # outside, except where an open boundary reaches it (it continues past the edge).
+        pad = 1 if self.ndim == 3 else ((0, 0), (1, 1), (1, 1))
+        feature = np.pad(self.exclusion, pad).astype(bool)
+        if self.open_boundary is not None:
+            if self.open_boundary.shape != self.mask.shape:
+                raise TissueError(f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
+                                  f"the tissue mask {self.mask.shape}; they must be the same grid")
+            feature |= np.pad(np.asarray(self.open_boundary, dtype=bool), pad, mode="edge")
+        dist = ndimage.distance_transform_edt(feature)
+        inner = dist[1:-1, 1:-1, 1:-1] if self.ndim == 3 else dist[:, 1:-1, 1:-1]
+        self.distance = np.ascontiguousarray(inner * self.exclusion, dtype=np.float32)
 
     @property
     def shape(self) -> tuple[int, int, int]:
         return self.mask.shape
+
+    @property
+    def cavity(self) -> np.ndarray:
+        """bool (nz, ny, nx): voxels of the exclusion domain outside the tissue (the heart's cavities)."""
+        return (self.exclusion == 1) & (self.mask == 0)
 
     @property
     def n_tissue_voxels(self) -> int:
@@ -201,21 +234,11 @@ def heart(n_terminals: int, voxel_size: float | None = None, **params) -> Tissue
     return heart_model.heart_tissue(n_terminals, voxel_size=voxel_size, **params)
 
 
-def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = None, origin=None,
-         inlets=None, array: str | None = None, **_) -> Tissue:
-    """A user's voxel mask from a ``.npy`` file or a Zarr array (medical-image segmentations).
-
-    ``path`` names a ``.npy`` file or a Zarr store (``array`` then names the array inside
-    it, default the store's root array). The array is (z, y, x) or (y, x) for a 2-D tissue,
-    nonzero = tissue. ``voxel_size`` [m] and ``origin`` (the [x, y, z] of the centre of voxel
-    [0, 0, 0], m) come from the config, else from the Zarr array's attrs of the same names.
-    ``inlets`` is a list of [x, y, z] positions [m].
-    """
-    if not path:
-        raise TissueError("tissue.path is required for tissue=mask: a .npy file or a Zarr array")
+def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarray, dict]:
+    """(data, attrs) of a ``.npy`` file or a Zarr array; errors name ``tissue.<field>``."""
     p = Path(path).expanduser()
     if not p.exists():
-        raise TissueError(f"tissue.path: mask file {str(p)!r} does not exist")
+        raise TissueError(f"tissue.{field}: mask file {str(p)!r} does not exist")
     attrs: dict = {}
     try:
         if p.suffix == ".npy":
@@ -227,17 +250,36 @@ def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = N
             if array:
                 node = node[array]
             if not hasattr(node, "shape"):
-                raise TissueError(f"tissue.path: {str(p)!r} is a Zarr group; name the mask with tissue.array")
+                raise TissueError(f"tissue.{field}: {str(p)!r} is a Zarr group; name the mask's array in it")
             data = node[...]
             attrs = dict(node.attrs)
     except TissueError:
         raise
     except Exception as exc:  # unreadable file: say which and why
-        raise TissueError(f"tissue.path: cannot read mask {str(p)!r}: {exc}") from exc
+        raise TissueError(f"tissue.{field}: cannot read mask {str(p)!r}: {exc}") from exc
     if data.ndim not in (2, 3):
-        raise TissueError(f"tissue.path: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
+        raise TissueError(f"tissue.{field}: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
+    return data, attrs
+
+
+def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = None, origin=None,
+         inlets=None, array: str | None = None, exclusion_path: str | None = None,
+         exclusion_array: str | None = None, **_) -> Tissue:
+    """A user's voxel mask from a ``.npy`` file or a Zarr array (medical-image segmentations).
+
+    ``path`` names a ``.npy`` file or a Zarr store (``array`` then names the array inside
+    it, default the store's root array). The array is (z, y, x) or (y, x) for a 2-D tissue,
+    nonzero = tissue. ``voxel_size`` [m] and ``origin`` (the [x, y, z] of the centre of voxel
+    [0, 0, 0], m) come from the config, else from the Zarr array's attrs of the same names.
+    ``inlets`` is a list of [x, y, z] positions [m]. ``exclusion_path`` (and
+    ``exclusion_array``), optional: a second mask on the same grid whose nonzero voxels
+    large vessels must not cross either, although they need no supply (cavities, bone).
+    """
+    if not path:
+        raise TissueError("tissue.path is required for tissue=mask: a .npy file or a Zarr array")
+    data, attrs = _load_mask_array(path, array, "path")
     if data.size == 0 or not np.any(data):
-        raise TissueError(f"tissue.path: the mask {str(p)!r} is empty (no nonzero voxel)")
+        raise TissueError(f"tissue.path: the mask {path!r} is empty (no nonzero voxel)")
     ndim = data.ndim
     h = voxel_size if voxel_size is not None else attrs.get("voxel_size")
     if h is None or not float(h) > 0:
@@ -249,9 +291,17 @@ def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = N
     if inlets is None:
         raise TissueError("tissue.inlets is required for tissue=mask: a list of [x, y, z] positions in metres")
     grid = (np.asarray(data) != 0).astype(np.uint8)
+    extra = None
+    if exclusion_path:
+        extra, _ = _load_mask_array(exclusion_path, exclusion_array, "exclusion_path")
+        if extra.shape != data.shape:
+            raise TissueError(f"tissue.exclusion_path: the exclusion mask has shape {extra.shape}, the tissue mask "
+                              f"(tissue.path) {data.shape}; they must be the same grid")
+        extra = (np.asarray(extra) != 0).astype(np.uint8)
     if ndim == 2:
         grid = grid[None]
-    return Tissue("mask", grid, float(h), org, inlets, ndim=ndim)
+        extra = None if extra is None else extra[None]
+    return Tissue("mask", grid, float(h), org, inlets, ndim=ndim, exclusion=extra)
 
 
 TISSUES: dict[str, Callable[..., Tissue]] = {
