@@ -1,0 +1,176 @@
+"""Time to quality on the heart: wall time, moves per second and final quality per run.
+
+For every requested N, schedule (an ``anneal=`` preset), budget and seed, one run of the
+heart (default tissue and physics) is grown as a pipeline job (:func:`vasc_pipeline.job.run_job`
+in a process pool, one core per run): checkpointed every minute, so an interrupted
+benchmark resumes where it stopped, even in the middle of a long run, when the same
+command is given again. Runs of schedule S at budget B live in ``--out/S/xB/runs/``.
+
+One JSON line per finished run (also appended to ``--out/rows.jsonl``; rows already there
+are not recomputed) with ``n_terminals``, ``anneal``, ``budget`` (times the schedule's
+default), ``steps``, ``seed``, ``wall_seconds`` (all sessions of the run, building the
+problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, voxels),
+``cost_vascular`` (C_v + C_w + A_o/A_wv C_o, W), ``cost_total`` (the annealed C),
+``cavity_share`` and the morphometry against Kassab 1993 (diameter-defined Strahler,
+element level, orders shifted to 11): ``diameter_error_<artery>`` and
+``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both) and
+``n_orders``. Then a table of mean ± SE per (N, schedule, budget).
+
+    python benchmarks/time_to_quality.py --out results/ttq                 # N = 500, 1000, 2000
+    python benchmarks/time_to_quality.py --out results/ttq --sizes 4000 6000 --seeds 0 1
+    python benchmarks/time_to_quality.py --out results/ttq --anneal fast_v1 --budgets 1 3
+    python benchmarks/time_to_quality.py --quick                           # seconds: wiring only
+
+Wall times are those of one core; two runs side by side on a 2-core machine share its
+memory bandwidth, and anything else running on the machine inflates them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ARTERIES = ("RCA", "LAD", "LCX")
+DEFAULT_SIZES = [500, 1000, 2000]
+LARGE_SIZES = [4000, 6000]
+
+
+def jobs_for(out: Path, schedule: str, budget: float, n: int, seeds: list[int], steps: int | None,
+             extra: list[str]):
+    """The pipeline jobs of one (schedule, budget, N): one per seed."""
+    from vasc_pipeline import config, sweep
+    from vasc_pipeline.config import scheduled_steps, to_run_config
+
+    base = [f"anneal={schedule}", f"n_terminals={n}", *extra]
+    if steps is None:
+        steps = int(round(budget * scheduled_steps(to_run_config(config.compose(base)))))
+    where = f"output_dir={out / schedule / f'x{budget:g}'}"
+    return [j for seed in seeds
+            for j in sweep.expand(config.compose([*base, f"anneal.steps={steps}", f"seed={seed}", where]))]
+
+
+def run_one(j) -> str:
+    from vasc_pipeline import job
+
+    job.run_job(j)
+    return j.store
+
+
+def row_of(store_path: str, schedule: str, budget: float) -> dict:
+    """The benchmark's row of a complete run store."""
+    from vasc_pipeline import morphometry
+    from vasc_pipeline.store import RunStore
+
+    store = RunStore.open(store_path, mode="r")
+    a = store.attrs
+    c = a["cost_recomputed"]
+    w_o = a["physics"]["A_o"] / a["physics"]["A_wv"]
+    row = {"n_terminals": int(a["coords"]["n_terminals"]), "anneal": schedule, "budget": budget,
+           "steps": int(a["steps_done"]), "seed": int(a["seed"]), "wall_seconds": float(a["wall_seconds"]),
+           "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
+           "cost_supply": float(c["supply"]), "cost_vascular": float(c["volume"] + c["power"] + w_o * c["exclusion"]),
+           "cost_total": float(c["total"]),
+           "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan")))}
+    tree = store.read_tree()
+    morph = morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
+    present = morph.sel(scheme="diameter_defined")["element_count"]
+    row["n_orders"] = int((present > 0).sum())
+    for artery in ARTERIES:
+        table = morphometry.compare_with_kassab(morph, artery)
+        row[f"diameter_error_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
+        row[f"length_error_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    row["store"] = store_path
+    return row
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """Mean and standard error over seeds per (N, schedule, budget)."""
+    names = ["wall_seconds", "moves_per_second", "cost_supply", "cost_vascular", "cavity_share", "n_orders",
+             *(f"{q}_error_{a}" for q in ("diameter", "length") for a in ARTERIES)]
+    table = []
+    for key in sorted({(r["n_terminals"], r["anneal"], r["budget"]) for r in rows}):
+        sel = [r for r in rows if (r["n_terminals"], r["anneal"], r["budget"]) == key]
+        entry = {"n_terminals": key[0], "anneal": key[1], "budget": key[2], "steps": sel[0]["steps"],
+                 "seeds": len(sel)}
+        for name in names:
+            v = np.array([r[name] for r in sel], dtype=float)
+            entry[name] = float(v.mean())
+            entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+        table.append(entry)
+    return table
+
+
+def print_table(table: list[dict]) -> None:
+    print("\nmean ± SE over seeds (C_s voxels; vascular = C_v + C_w + A_o/A_wv C_o [W]; diameter error = "
+          "mean |log10 model/Kassab| RCA/LAD/LCX)")
+    print(f"{'N':>5} {'anneal':>8} {'x':>4} {'moves':>8} {'seeds':>5} {'wall s':>13} {'moves/s':>8} "
+          f"{'C_s':>20} {'vascular W':>19} {'cavity':>7} {'diameter error':>16} {'orders':>6}")
+    for t in table:
+        diam = "/".join(f"{t[f'diameter_error_{a}']:.3f}" for a in ARTERIES)
+        print(f"{t['n_terminals']:>5} {t['anneal']:>8} {t['budget']:>4g} {t['steps']:>8.2g} {t['seeds']:>5} "
+              f"{t['wall_seconds']:>7.0f} ±{t['wall_seconds_se']:<5.0f}{t['moves_per_second']:>8.3g} "
+              f"{t['cost_supply']:>10.0f} ±{t['cost_supply_se']:<8.0f}{t['cost_vascular']:>9.4g} "
+              f"±{t['cost_vascular_se']:<8.2g}{t['cavity_share']:>7.4f} {diam:>16} {t['n_orders']:>6.1f}")
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", help=f"N values (default {DEFAULT_SIZES})")
+    parser.add_argument("--large", action="store_true", help=f"add N = {LARGE_SIZES}")
+    parser.add_argument("--anneal", nargs="+", default=["fast_v1", "fast"], help="anneal presets (default: fast_v1 fast)")
+    parser.add_argument("--budgets", type=float, nargs="+", default=[1.0],
+                        help="budgets in multiples of each schedule's default moves (default: 1)")
+    parser.add_argument("--steps", type=int, help="exact moves per run instead of --budgets")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default: 0)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count(), help="runs side by side (one core each)")
+    parser.add_argument("--out", type=Path, help="directory of the run stores and rows.jsonl")
+    parser.add_argument("--override", action="append", default=[], help="extra config override, e.g. m_b=6413")
+    parser.add_argument("--quick", action="store_true", help="tiny runs (N = 40, 20000 moves) in a temporary dir")
+    args = parser.parse_args(argv)
+    sizes = args.sizes or DEFAULT_SIZES
+    if args.large:
+        sizes = sorted(set(sizes) | set(LARGE_SIZES))
+    steps = args.steps
+    if args.quick:
+        sizes, steps, args.budgets = [40], 20_000, [1.0]
+        args.override = [*args.override, "anneal.trace_every=10000"]
+    tmp = tempfile.TemporaryDirectory() if args.out is None else None
+    out = args.out if args.out is not None else Path(tmp.name)
+    out.mkdir(parents=True, exist_ok=True)
+    rows_file = out / "rows.jsonl"
+    done = {}
+    if rows_file.exists():
+        done = {r["store"]: r for r in map(json.loads, rows_file.read_text().splitlines())}
+    wanted = []  # (job, schedule, budget)
+    for schedule in args.anneal:
+        for budget in ([1.0] if steps else args.budgets):
+            for n in sizes:
+                wanted += [(j, schedule, budget) for j in jobs_for(out, schedule, budget, n, args.seeds, steps,
+                                                                   args.override)]
+    todo = [w for w in wanted if w[0].store not in done]
+    todo.sort(key=lambda w: -w[0].config["anneal"]["steps"])  # longest first: the pool finishes together
+    by_store = {w[0].store: w for w in todo}
+    with ProcessPoolExecutor(args.workers) as pool:
+        for store in pool.map(run_one, [w[0] for w in todo]):
+            _, schedule, budget = by_store[store]
+            row = row_of(store, schedule, budget)
+            done[store] = row
+            print(json.dumps(row), flush=True)
+            with rows_file.open("a") as f:
+                f.write(json.dumps(row) + "\n")
+    rows = [done[w[0].store] for w in wanted]
+    table = summarise(rows)
+    print_table(table)
+    if tmp is not None:
+        tmp.cleanup()
+    return table
+
+
+if __name__ == "__main__":
+    main()
