@@ -14,11 +14,14 @@ problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, vo
 ``cavity_share`` and the morphometry against Kassab 1993 (diameter-defined Strahler,
 element level, orders shifted to 11): ``diameter_error_<artery>`` and
 ``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both) and
-``n_orders``. Then a table of mean ± SE per (N, schedule, budget).
+``n_orders``. Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
+(``--override``) needs a ``--label`` of its own: it names the variant's directory and rows.
 
     python benchmarks/time_to_quality.py --out results/ttq                 # N = 500, 1000, 2000
     python benchmarks/time_to_quality.py --out results/ttq --sizes 4000 6000 --seeds 0 1
     python benchmarks/time_to_quality.py --out results/ttq --anneal fast_v1 --budgets 1 3
+    python benchmarks/time_to_quality.py --out results/ttq --anneal fast --label pack \
+        --override anneal.packing_steps_per_terminal=10000 --override anneal.supply_T_start=null
     python benchmarks/time_to_quality.py --quick                           # seconds: wiring only
 
 Wall times are those of one core; two runs side by side on a 2-core machine share its
@@ -42,15 +45,15 @@ LARGE_SIZES = [4000, 6000]
 
 
 def jobs_for(out: Path, schedule: str, budget: float, n: int, seeds: list[int], steps: int | None,
-             extra: list[str]):
-    """The pipeline jobs of one (schedule, budget, N): one per seed."""
+             extra: list[str], label: str | None = None):
+    """The pipeline jobs of one (schedule, budget, N): one per seed, in ``out/<label>/x<budget>``."""
     from vasc_pipeline import config, sweep
     from vasc_pipeline.config import scheduled_steps, to_run_config
 
     base = [f"anneal={schedule}", f"n_terminals={n}", *extra]
     if steps is None:
         steps = int(round(budget * scheduled_steps(to_run_config(config.compose(base)))))
-    where = f"output_dir={out / schedule / f'x{budget:g}'}"
+    where = f"output_dir={out / (label or schedule) / f'x{budget:g}'}"
     return [j for seed in seeds
             for j in sweep.expand(config.compose([*base, f"anneal.steps={steps}", f"seed={seed}", where]))]
 
@@ -131,8 +134,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser.add_argument("--workers", type=int, default=os.cpu_count(), help="runs side by side (one core each)")
     parser.add_argument("--out", type=Path, help="directory of the run stores and rows.jsonl")
     parser.add_argument("--override", action="append", default=[], help="extra config override, e.g. m_b=6413")
+    parser.add_argument("--label", help="name of this variant (default: the anneal preset); runs of a label share "
+                                        "one output directory, so a variant with --override needs its own label")
     parser.add_argument("--quick", action="store_true", help="tiny runs (N = 40, 20000 moves) in a temporary dir")
     args = parser.parse_args(argv)
+    if args.label and len(args.anneal) > 1:
+        parser.error("--label names one variant: give one --anneal preset with it")
     sizes = args.sizes or DEFAULT_SIZES
     if args.large:
         sizes = sorted(set(sizes) | set(LARGE_SIZES))
@@ -151,8 +158,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
     for schedule in args.anneal:
         for budget in ([1.0] if steps else args.budgets):
             for n in sizes:
-                wanted += [(j, schedule, budget) for j in jobs_for(out, schedule, budget, n, args.seeds, steps,
-                                                                   args.override)]
+                label = args.label or schedule
+                wanted += [(j, label, budget) for j in jobs_for(out, schedule, budget, n, args.seeds, steps,
+                                                                args.override, args.label)]
     todo = [w for w in wanted if w[0].store not in done]
     todo.sort(key=lambda w: -w[0].config["anneal"]["steps"])  # longest first: the pool finishes together
     by_store = {w[0].store: w for w in todo}

@@ -16,6 +16,7 @@ from typing import Any, Optional
 
 __all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
            "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
+           "scheduled_steps", "packing_steps",
            "compose", "CONFIG_DIR"]
 
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
@@ -74,8 +75,13 @@ class AnnealConfig:
     accept_start: float = 0.8            # mean acceptance of uphill moves at a calibrated T_start
     T_end_rel: float = 1e-4              # calibrated T_end relative to w(1) R_supply
     calibration_samples: int = 4000      # infinite-temperature moves measured for T_start
-    steps: Optional[int] = None          # proposed moves; None: steps_at_1000 * (N / 1000)^2
+    steps: Optional[int] = None          # proposed moves; None: steps_at_1000 * (N / 1000)^steps_exponent
     steps_at_1000: float = PAPER_STEPS_AT_1000
+    steps_exponent: float = 2.0          # budget law in N (the paper's guess: 2)
+    packing_steps_per_terminal: float = 0.0  # packing phase (supply alone, terminals only) before the tree
+                                         # anneal, in proposals per terminal, part of the steps; 0: none
+    packing_T_start: float = 1.0         # its temperature at the start, in voxels of one supply sphere
+    packing_T_end: float = 0.05          # ... and at its end, in C_s units
     p_swap: float = 0.5                  # probability that a proposal is a swap
     p_local: float = 0.0                 # probability that a swap partner is a spatial neighbour (else uniform)
     neighbour_cell: float = 1.0          # edge of the neighbour cells, in R_supply
@@ -145,10 +151,16 @@ def _positive(name: str, value: float) -> None:
 
 
 def scheduled_steps(cfg: RunConfig) -> int:
-    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default."""
+    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default
+    ``steps_at_1000 * (N / 1000)^steps_exponent``."""
     if cfg.anneal.steps is not None:
         return int(cfg.anneal.steps)
-    return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** 2)))
+    return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** cfg.anneal.steps_exponent)))
+
+
+def packing_steps(cfg: RunConfig) -> int:
+    """Proposals of the packing phase (the first of the run's steps): per terminal times N."""
+    return int(round(cfg.anneal.packing_steps_per_terminal * cfg.n_terminals))
 
 
 def validate(cfg: RunConfig) -> RunConfig:
@@ -198,6 +210,21 @@ def validate(cfg: RunConfig) -> RunConfig:
     if a.steps is not None and (not isinstance(a.steps, int) or a.steps < 1):
         raise ConfigError(f"anneal.steps must be an integer >= 1 (proposed moves per run), got {a.steps}")
     _positive("anneal.steps_at_1000", a.steps_at_1000)
+    if not (0.0 <= a.steps_exponent <= 4.0):
+        raise ConfigError(f"anneal.steps_exponent must lie in [0, 4], got {a.steps_exponent}")
+    if not (0.0 <= a.packing_steps_per_terminal < math.inf):
+        raise ConfigError(f"anneal.packing_steps_per_terminal must be a finite number >= 0, got "
+                          f"{a.packing_steps_per_terminal}")
+    if a.packing_steps_per_terminal > 0:
+        _positive("anneal.packing_T_start", a.packing_T_start)
+        _positive("anneal.packing_T_end", a.packing_T_end)
+        if cfg.terminals.fixed:
+            raise ConfigError("anneal.packing_steps_per_terminal must be 0 with terminals.fixed=true (the packing "
+                              "phase moves terminals)")
+        if packing_steps(cfg) >= scheduled_steps(cfg):
+            raise ConfigError(f"anneal.packing_steps_per_terminal={a.packing_steps_per_terminal:g} gives "
+                              f"{packing_steps(cfg)} packing proposals, but the run has only {scheduled_steps(cfg)} "
+                              "(anneal.steps): leave room for the tree anneal")
     if not 0.0 <= a.p_swap <= 1.0:
         raise ConfigError(f"anneal.p_swap must lie in [0, 1], got {a.p_swap}")
     _positive("anneal.step_terminal", a.step_terminal)

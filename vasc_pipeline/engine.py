@@ -20,8 +20,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import kernel
-from .config import ConfigError, RunConfig, scheduled_steps, to_run_config, validate
+from . import kernel, packing
+from .config import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config, validate
 from .costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, full_costs
 from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
@@ -102,6 +102,7 @@ def build_problem(config: Any) -> Problem:
     lo, hi = tissue.bounds
     total_steps = scheduled_steps(cfg)
     a = cfg.anneal
+    pack_steps = packing_steps(cfg)
     cell_size = a.neighbour_cell * physics.supply_radius
     cell_shape = np.maximum(np.ceil((hi - lo) / cell_size), 1).astype(np.int64)
     if tissue.ndim == 2:
@@ -120,10 +121,12 @@ def build_problem(config: Any) -> Problem:
         supply_on=terms.supply, exclusion_on=terms.exclusion, pressure_on=terms.pressure,
         move_terminals=not cfg.terminals.fixed, planar=tissue.ndim == 2,
         pressure_inlet=p.pressure_inlet, pressure_terminal=p.pressure_terminal,
-        total_steps=float(total_steps), p_swap=float(a.p_swap), p_local=float(a.p_local),
+        total_steps=float(total_steps), pack_steps=float(pack_steps),
+        pack_T_start=float(a.packing_T_start) * sphere_voxels, pack_T_end=float(a.packing_T_end),
+        p_swap=float(a.p_swap), p_local=float(a.p_local),
         cell_lo=lo.astype(np.float64), cell_size=float(cell_size), cell_shape=cell_shape,
         supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels, supply_T_end=float(a.supply_T_end),
-        supply_steps=float(round(a.supply_phase * total_steps)) if a.supply_T_start is not None else 0.0,
+        supply_steps=float(round(a.supply_phase * (total_steps - pack_steps))) if a.supply_T_start is not None else 0.0,
         adapt_steps=bool(a.adapt_steps), acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius)
@@ -189,8 +192,13 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
 
 
 def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
-    """Propose ``n_steps`` moves (in place). The GIL is released for the whole block."""
-    kernel.anneal_block(problem.model, state, int(n_steps))
+    """Propose ``n_steps`` moves (in place): packing moves first while the packing phase
+    lasts (:mod:`vasc_pipeline.packing`), then the tree anneal's. The GIL is released."""
+    n = int(n_steps)
+    if state.counters[kernel.COUNTER_STEP] < problem.model.pack_steps:
+        n -= packing.pack_block(problem.model, state, n)
+    if n > 0:
+        kernel.anneal_block(problem.model, state, n)
 
 
 def running_costs(problem: Problem, state: kernel.State) -> dict[str, float]:

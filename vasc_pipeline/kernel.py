@@ -38,7 +38,10 @@ Model = namedtuple("Model", [
     "w_exclusion", "w_pressure", "w_supply",  # scaled weights A_x / A_wv
     "supply_on", "exclusion_on", "pressure_on", "move_terminals", "planar",
     "pressure_inlet", "pressure_terminal",    # Pa
-    "total_steps",       # length of the exponential schedule (its ends are in State.schedule)
+    "total_steps",       # proposals of the run; the exponential schedule (ends in State.schedule) runs
+                         # from pack_steps to total_steps
+    "pack_steps",        # proposals of the packing phase (vasc_pipeline.packing; 0: none)
+    "pack_T_start", "pack_T_end",  # its temperatures, C_s units
     "p_swap",            # probability that a proposal is a swap
     "p_local",           # probability that a swap partner is drawn from the neighbour cells (0: uniform only)
     "cell_lo", "cell_size", "cell_shape",     # neighbour cell grid: lower corner (m), edge (m), int64 (3,) [x, y, z]
@@ -87,8 +90,8 @@ def _add(costs, compensation, k, x):
 
 @jit
 def temperature(model, state, step):
-    """Exponential schedule ``state.schedule`` = (T_start, T_end) over total_steps; T_end afterwards."""
-    frac = min(step / model.total_steps, 1.0)
+    """Exponential schedule ``state.schedule`` = (T_start, T_end) from pack_steps to total_steps; T_end afterwards."""
+    frac = min(max(step - model.pack_steps, 0.0) / (model.total_steps - model.pack_steps), 1.0)
     t_start = state.schedule[0]
     return t_start * math.exp(math.log(state.schedule[1] / t_start) * frac)
 
@@ -102,7 +105,7 @@ def supply_weight(model, state, temp):
     weight is temp / T_s, never above w_supply. Afterwards (and when off) it is w_supply,
     so the run ends on the true cost.
     """
-    step = state.counters[COUNTER_STEP]
+    step = state.counters[COUNTER_STEP] - model.pack_steps  # the tree anneal's own step
     if step >= model.supply_steps:
         return model.w_supply
     frac = step / model.supply_steps

@@ -1,0 +1,146 @@
+"""The packing phase (vasc_pipeline.packing): kernel against its NumPy twin, the end of the
+phase, determinism across block splits, checkpoints and a SIGKILL, and bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vasc_pipeline import config, costs, engine, job, kernel, packing, sweep
+from vasc_pipeline.config import ConfigError
+from vasc_pipeline.tree import check_tree
+
+from helpers import make_problem
+
+REPO = Path(__file__).resolve().parents[1]
+PACKED = ("tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.packing_steps_per_terminal=500",
+          "anneal.steps=60000", "anneal.trace_every=5000")
+
+
+def test_pack_block_equals_its_numpy_twin_move_for_move():
+    problem = make_problem("tissue=sphere", "n_terminals=12", "anneal=fast", "anneal.packing_steps_per_terminal=100",
+                           "anneal.steps=5000")
+    fast, slow = engine.initial_state(problem, 3), engine.initial_state(problem, 3)
+    p = problem.physics
+    for n in (700, 300):  # within the phase: stale tree caches, exact supply
+        assert packing.pack_block(problem.model, fast, n) == n
+        packing.pack_block_reference(problem.model, slow, n, problem.tissue, p.supply_radius)
+        for name in ("position", "rng", "counters", "step_size", "supply"):
+            np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+        assert fast.costs[kernel.SUPPLY] == slow.costs[kernel.SUPPLY]
+    c = fast.counters
+    assert 0 < c[kernel.COUNTER_TERMINAL_ACCEPTED] < c[kernel.COUNTER_TERMINAL_PROPOSED] == 1000
+    assert c[kernel.COUNTER_SWAP_PROPOSED] == c[kernel.COUNTER_BIFURCATION_PROPOSED] == 0
+    # the rest of the phase: it ends at step 1200 exactly, whatever the block asked for
+    assert packing.pack_block(problem.model, fast, 10_000) == 200
+    packing.pack_block_reference(problem.model, slow, 10_000, problem.tissue, p.supply_radius)
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+    assert c[kernel.COUNTER_STEP] == problem.model.pack_steps == 1200
+
+
+def test_the_phase_packs_then_hands_a_consistent_tree_to_the_anneal():
+    problem = make_problem(*PACKED)
+    state = engine.initial_state(problem, 0)
+    before = engine.running_costs(problem, state)["supply"]
+    engine.run_block(problem, state, int(problem.model.pack_steps))  # exactly the phase
+    tree = engine.tree_of(problem, state)
+    check_tree(tree, problem.tissue)
+    running = engine.running_costs(problem, state)
+    full = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
+    assert running["supply"] == full["supply"] < 0.6 * before
+    for term in ("volume", "power", "exclusion", "total"):
+        assert running[term] == pytest.approx(full[term], rel=1e-9), term
+    # every bifurcation at the mean of its children
+    first = problem.physics.n_inlets + problem.physics.n_terminals
+    for b in range(first, tree.n_nodes):
+        c0, c1 = tree.children[b]
+        np.testing.assert_allclose(tree.position[b], 0.5 * (tree.position[c0] + tree.position[c1]), rtol=1e-15)
+    # then the tree anneal: swaps and bifurcation moves happen, the sums stay exact
+    engine.run_block(problem, state, 20_000)
+    assert state.counters[kernel.COUNTER_SWAP_ACCEPTED] > 0
+    assert state.counters[kernel.COUNTER_BIFURCATION_ACCEPTED] > 0
+    tree = engine.tree_of(problem, state)
+    full = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
+    assert engine.running_costs(problem, state)["total"] == pytest.approx(full["total"], rel=1e-9)
+
+
+def test_tree_schedule_starts_after_the_phase():
+    problem = make_problem(*PACKED)
+    state = engine.initial_state(problem, 0)
+    pack = int(problem.model.pack_steps)
+    t_start, t_end = state.schedule
+    assert kernel.temperature(problem.model, state, 0) == kernel.temperature(problem.model, state, pack) == t_start
+    assert kernel.temperature(problem.model, state, problem.total_steps) == pytest.approx(t_end, rel=1e-12)
+    assert packing.packing_temperature(problem.model, 0) == pytest.approx(problem.model.pack_T_start)
+
+
+def test_block_splits_and_checkpoint_round_trips_across_the_phase_are_bit_identical():
+    problem = make_problem(*PACKED)
+    one = engine.initial_state(problem, 5)
+    engine.run_block(problem, one, 60_000)
+    split = engine.initial_state(problem, 5)
+    for n in (1, 9_999, 9_999, 2, 17_000, 22_999):  # the phase ends at 20_000, inside a block
+        engine.run_block(problem, split, n)
+        split = engine.restore_state(problem, engine.state_arrays(split))
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+
+
+def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
+    overrides = ["tissue=sphere", "n_terminals=300", "anneal=fast", "anneal.packing_steps_per_terminal=3000",
+                 "anneal.steps=1000000", "anneal.trace_every=20000", "checkpoint.every_seconds=0.01",
+                 f"output_dir={tmp_path}"]
+    (j,) = sweep.expand(config.compose(overrides))
+    pack = 3000 * 300
+    script = ("import sys, json; from vasc_pipeline import job, sweep, config; "
+              "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)")
+    proc = subprocess.Popen([sys.executable, "-c", script, json.dumps(overrides)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    store_attrs = Path(j.store) / "zarr.json"
+    killed_at = 0
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                killed_at = json.loads(store_attrs.read_text())["attributes"].get("steps_done", 0)
+            except (OSError, ValueError, KeyError):
+                killed_at = 0
+            if 0 < killed_at:
+                break
+            time.sleep(0.005)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert 0 < killed_at < pack, "no checkpoint inside the packing phase before the kill"
+    summary = job.run_job(j)
+    assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < pack
+    reference = engine.run(j.config, seed=0)
+    tree = job.read_final_tree(j.store)
+    np.testing.assert_array_equal(tree["parent"], reference.tree.parent)
+    np.testing.assert_array_equal(tree["position"], reference.tree.position)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["anneal.packing_steps_per_terminal=1000", "anneal.steps=1000"], r"anneal\.packing_steps_per_terminal=1000 "
+                                                                     r"gives 16000 packing proposals"),
+    (["anneal.packing_steps_per_terminal=-1"], r"anneal\.packing_steps_per_terminal must be a finite number >= 0"),
+    (["anneal.packing_steps_per_terminal=10", "anneal.packing_T_end=0"], r"anneal\.packing_T_end must be"),
+    (["anneal.steps_exponent=5"], r"anneal\.steps_exponent must lie in \[0, 4\]"),
+])
+def test_bad_packing_settings_name_the_field(overrides, message):
+    with pytest.raises(ConfigError, match=message):
+        make_problem("tissue=sphere", "n_terminals=16", *overrides)
+
+
+def test_budget_law_exponent():
+    cfg = config.to_run_config(config.compose(["n_terminals=2000", "anneal=fast", "anneal.steps_exponent=1.5"]))
+    assert config.scheduled_steps(cfg) == round(1e8 * 2.0 ** 1.5)
