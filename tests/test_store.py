@@ -247,3 +247,20 @@ def test_job_refuses_a_changed_config_and_leaves_the_store_alone(tmp_path):
         job.run_job(changed)
     assert (Path(j.store) / "zarr.json").read_bytes() == before
     assert json.loads(before)["attributes"]["status"] == "complete"
+
+
+def test_keys_added_later_at_their_neutral_value_keep_old_stores_valid(tmp_path):
+    """A store written before a key existed resumes under a config holding the key's neutral value."""
+    from vasc_pipeline.config import KEYS_ADDED_LATER
+
+    j = tiny_job(tmp_path)
+    old = json.loads(json.dumps(j.config))
+    del old["anneal"]["packing_steps_per_terminal"], old["tissue"]["exclusion_path"]  # as stored by older code
+    assert old["anneal"].get("steps_exponent") == KEYS_ADDED_LATER["anneal.steps_exponent"]
+    s = store.RunStore.create(j.store, run_id=j.run_id, seed=0, config=old, coords=j.coords, total_steps=10)
+    s.check_config(j.config)  # same run
+    changed = json.loads(json.dumps(j.config))
+    changed["anneal"]["packing_steps_per_terminal"] = 5.0  # not neutral: a different run
+    with pytest.raises(ConfigError, match=r"anneal\.packing_steps_per_terminal: '<absent>' \(stored\) vs 5\.0"):
+        s.check_config(changed)
+    assert "packing_steps_per_terminal" in j.config["anneal"]  # hashing never edits the caller's config

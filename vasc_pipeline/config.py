@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-__all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
+__all__ = ["ConfigError", "KEYS_ADDED_LATER", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
            "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
            "scheduled_steps", "packing_steps",
            "compose", "CONFIG_DIR"]
@@ -24,6 +24,23 @@ _PACKAGE_DIR = Path(__file__).resolve().parent
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
 STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
+
+
+# Keys added after runs were already stored, with the value that does what the code did
+# before the key existed. A stored config that lacks such a key is the same run as a
+# requested config holding that value, so a new option never invalidates old results
+# (store.hashed_config leaves these keys out at these values). A key whose default changed
+# the model (tissue.exclude_cavities: True) is listed with its old behaviour, so runs made
+# before it are, rightly, a different configuration.
+KEYS_ADDED_LATER: dict[str, Any] = {
+    "tissue.exclude_cavities": False,
+    "tissue.exclusion_path": None,
+    "tissue.exclusion_array": None,
+    "anneal.steps_exponent": 2.0,
+    "anneal.packing_steps_per_terminal": 0.0,
+    "anneal.packing_T_start": 1.0,
+    "anneal.packing_T_end": 0.05,
+}
 
 
 class ConfigError(ValueError):

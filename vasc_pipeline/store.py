@@ -48,7 +48,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-from .config import ConfigError
+from .config import KEYS_ADDED_LATER, ConfigError
 
 __all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "run_path", "run_lock", "config_hash",
            "hashed_config", "config_differences", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
@@ -113,8 +113,25 @@ def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
 
 
 def hashed_config(config: Mapping[str, Any]) -> dict:
-    """The part of a run config that determines its result (see ``_UNHASHED``)."""
-    return {k: v for k, v in config.items() if k not in _UNHASHED}
+    """The part of a run config that determines its result (see ``_UNHASHED``).
+
+    Keys added to the schema later (:data:`vasc_pipeline.config.KEYS_ADDED_LATER`) are left
+    out where they hold the value that reproduces the older code, so stores written before
+    they existed keep their identity.
+    """
+    out = {k: v for k, v in config.items() if k not in _UNHASHED}
+    for dotted, neutral in KEYS_ADDED_LATER.items():
+        *parents, leaf = dotted.split(".")
+        node = out
+        for name in parents:
+            node = node.get(name) if isinstance(node, Mapping) else None
+        if isinstance(node, Mapping) and leaf in node and node[leaf] == neutral:
+            node = out
+            for name in parents:  # copy the path before removing, the caller's config stays intact
+                node[name] = dict(node[name])
+                node = node[name]
+            del node[leaf]
+    return out
 
 
 def config_hash(config: Mapping[str, Any]) -> str:
@@ -239,7 +256,9 @@ class RunStore:
     def check_config(self, config: Mapping[str, Any]) -> None:
         """Refuse (:class:`ConfigError`) a requested config whose result-determining part differs."""
         requested = _jsonable(config)
-        if config_hash(requested) == self.group.attrs["config_hash"]:
+        # The stored config is hashed anew: the hash's definition may have grown (new keys
+        # at their neutral values are left out), the stored string would then be stale.
+        if config_hash(requested) == config_hash(self.group.attrs["config"]):
             return
         diff = config_differences(self.group.attrs["config"], requested)
         raise ConfigError(
