@@ -309,3 +309,14 @@ def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary
         stored = store.RunStore.open(j.store, mode="r").attrs["statistics"]["cavity_share"]
         assert 0.0 <= stored <= 1.0
         assert float(shares.sel(n_terminals=16, m_b=641.3, seed=j.coords["seed"])) == stored
+
+
+def test_figures_leave_the_callers_matplotlib_state_alone(swept):
+    """Importing the figures module or drawing changes neither the backend nor rcParams."""
+    code = ("import matplotlib; matplotlib.use('svg'); matplotlib.rcParams['font.size'] = 13.0; "
+            "from vasc_pipeline import figures, reduce; import xarray as xr, sys; "
+            "figures.make_figures(xr.open_datatree(sys.argv[1] + '/summary.zarr', engine='zarr'), sys.argv[1]); "
+            "print(matplotlib.get_backend(), matplotlib.rcParams['font.size'], matplotlib.rcParams['savefig.bbox'])")
+    out = subprocess.run([sys.executable, "-c", code, str(swept[0])], capture_output=True, text=True, cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["svg", "13.0", "None"]

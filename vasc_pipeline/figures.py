@@ -29,15 +29,16 @@ import math
 import os
 from pathlib import Path
 
+import functools
+
 import matplotlib
-
-matplotlib.use("Agg")  # files only; never needs a display (workers, clusters, CI)
-
-import matplotlib.pyplot as plt  # noqa: E402
-import matplotlib.ticker  # noqa: E402,F401
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+import matplotlib.ticker
+import numpy as np
+import xarray as xr
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
 __all__ = ["make_figures", "plot_morphometry", "plot_asymmetry", "plot_mb_effect", "plot_cost_traces",
            "plot_convergence", "plot_tree", "REFERENCE_M_B"]
@@ -51,8 +52,24 @@ _UM, _MM = 1e6, 1e3
 # Inlet names by tissue, in inlet order (the run store keeps positions, not names; see heart.py).
 _INLET_NAMES = {"heart": ("LCA", "RCA")}
 
-plt.rcParams.update({"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 7.5,
-                     "legend.frameon": False, "savefig.bbox": "tight"})
+# Our figures' style, applied inside each plotting function only (rc_context): importing this
+# module or drawing a figure changes neither the caller's backend nor their rcParams. Figures
+# are plain Figure objects (no pyplot state); savefig renders PNG with Agg, no display needed.
+_STYLE = {"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 7.5,
+          "legend.frameon": False, "savefig.bbox": "tight"}
+
+
+def _styled(func):
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        with matplotlib.rc_context(_STYLE):
+            return func(*args, **kwargs)
+    return wrapper
+
+
+def _subplots(nrows: int = 1, ncols: int = 1, *, figsize, **kwargs):
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
 # --------------------------------------------------------------------------------------------
@@ -86,7 +103,7 @@ def _n_values(morph: xr.Dataset, point: dict) -> list[int]:
 
 
 def _colors(n: int, cmap: str = "viridis") -> list:
-    cm = plt.get_cmap(cmap)
+    cm = matplotlib.colormaps[cmap]
     if cmap == "tab10":
         return [cm(i % 10) for i in range(n)]
     # the light end of viridis/plasma is hard to see on white: stop at 0.8
@@ -143,6 +160,7 @@ def _model(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, l
 _WHAT = {"diameter": ("D", _UM, "element diameter [µm]"), "length": ("L", _MM, "element length [mm]")}
 
 
+@_styled
 def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     """Element diameter and length against order with Kassab's RCA/LAD/LCX; largest N and every N."""
     morph = summary["morphometry"].to_dataset()
@@ -155,7 +173,7 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     orders = morph.order.values
     orders = orders[orders >= 1]
     ncols = 2 if len(ns) > 1 else 1
-    fig, axes = plt.subplots(2, ncols, figsize=(3.6 * ncols + 0.4, 6.2), squeeze=False, sharex=True,
+    fig, axes = _subplots(2, ncols, figsize=(3.6 * ncols + 0.4, 6.2), squeeze=False, sharex=True,
                              sharey="row")
     colors = _colors(len(ns))
     for row, what in enumerate(("diameter", "length")):
@@ -210,6 +228,7 @@ def _ratio_panels(axes, asym, points_labels, colors, orders) -> None:
         ax.set_xlabel("parent order (diameter-defined Strahler; trunk = 11)")
 
 
+@_styled
 def plot_asymmetry(summary: xr.DataTree, path) -> Path | None:
     """D_s/D_p and D_l/D_p against parent order for every N (m_b nearest 641.3)."""
     asym = summary["asymmetry"].to_dataset()
@@ -221,7 +240,7 @@ def plot_asymmetry(summary: xr.DataTree, path) -> Path | None:
         return None
     counts = asym["bifurcation_count"].sel(point).sel(scheme="diameter_defined")
     orders = asym.order.values[(counts > 0).any("n_terminals").values]
-    fig, axes = plt.subplots(1, 2, figsize=(8.2, 3.4))
+    fig, axes = _subplots(1, 2, figsize=(8.2, 3.4))
     _ratio_panels(axes, asym, [({**point, "n_terminals": n}, f"N = {n}") for n in ns], _colors(len(ns)), orders)
     axes[0].legend(loc="lower left")
     fig.suptitle(f"Bifurcation asymmetry of the best trees ({_point_text(point)}); mean ± SE", fontsize=9)
@@ -229,6 +248,7 @@ def plot_asymmetry(summary: xr.DataTree, path) -> Path | None:
     return _save(fig, path)
 
 
+@_styled
 def plot_mb_effect(summary: xr.DataTree, path) -> Path | None:
     """Diameter, length and both ratios against order for every m_b at the largest N."""
     morph = summary["morphometry"].to_dataset()
@@ -244,7 +264,7 @@ def plot_mb_effect(summary: xr.DataTree, path) -> Path | None:
         return None
     colors = _colors(len(mbs), "plasma")
     orders = morph.order.values[morph.order.values >= 1]
-    fig, axes = plt.subplots(2, 2, figsize=(8.2, 6.6))
+    fig, axes = _subplots(2, 2, figsize=(8.2, 6.6))
     for ax, what in zip(axes[0], ("diameter", "length")):
         key, scale, ylabel = _WHAT[what]
         _kassab(ax, kassab, key, scale, orders)
@@ -286,6 +306,7 @@ def _cell_title(point: dict) -> str:
     return ", ".join(parts)
 
 
+@_styled
 def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path | None:
     """Annealed total cost against step, every seed, one panel per cell (the best seed drawn bold)."""
     traces = summary["traces"].to_dataset()
@@ -296,7 +317,7 @@ def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path |
         return None
     ncols = min(4, len(cells))
     nrows = math.ceil(len(cells) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(2.9 * ncols + 0.4, 2.5 * nrows + 0.3), squeeze=False)
+    fig, axes = _subplots(nrows, ncols, figsize=(2.9 * ncols + 0.4, 2.5 * nrows + 0.3), squeeze=False)
     seeds = traces.seed.values
     colors = _colors(len(seeds), "tab10" if len(seeds) <= 10 else "viridis")
     for ax, point in zip(axes.flat, cells):
@@ -341,6 +362,7 @@ def _sci(value: float) -> str:
     return f"${mant:.3g}{{\\times}}10^{{{exp}}}$"
 
 
+@_styled
 def plot_convergence(summary: xr.DataTree, path) -> Path | None:
     """Mean final cost ± standard error over seeds against the number of steps (the paper's appendix)."""
     costs = summary["costs"].to_dataset()
@@ -349,7 +371,7 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
         return None
     others = [d for d in dims if d != "steps"]
     groups = _cells(costs, others) if others else [{}]
-    fig, axes = plt.subplots(1, 2, figsize=(8.2, 3.4))
+    fig, axes = _subplots(1, 2, figsize=(8.2, 3.4))
     colors = _colors(len(groups), "tab10" if len(groups) <= 10 else "viridis")  # categories, not a scale
     steps = costs.steps.values.astype(float)
     panels = ((costs["cost_total"], f"final annealed total cost C [{costs['cost_total'].attrs.get('units', '')}]"),
@@ -377,7 +399,6 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
     if not drawn:
-        plt.close(fig)
         return None
     fig.suptitle("Convergence: mean final cost ± standard error over seeds", fontsize=9)
     fig.tight_layout()
@@ -390,6 +411,7 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
 # Trees
 
 
+@_styled
 def plot_tree(store_path, path, title: str | None = None) -> Path:
     """The final tree of a run store in projection: line width by radius, colour by inlet, tissue outline.
 
@@ -414,10 +436,10 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
     axis_of = {"x": 0, "y": 1, "z": 2}
     # mask axes are (z, y, x): project along the axis not shown
     mask_axis = {0: 0, 1: 1, 2: 2}  # view index -> mask axis to collapse (z for x-y, y for x-z, x for y-z)
-    fig, axes = plt.subplots(1, len(views), figsize=(3.4 * len(views) + 0.6, 3.6), squeeze=False)
+    fig, axes = _subplots(1, len(views), figsize=(3.4 * len(views) + 0.6, 3.6), squeeze=False)
     rmax = float(radius[seg].max())
     widths = 0.25 + 3.5 * radius[seg] / rmax
-    colors = plt.get_cmap("tab10")
+    colors = matplotlib.colormaps["tab10"]
     for ax, (a, b, vi) in zip(axes[0], views):
         proj = mask.any(axis=mask_axis[vi])  # 2-D array (rows, cols)
         # rows/cols of the projection: x-y -> (y, x); x-z -> (z, x); y-z -> (z, y)
@@ -428,7 +450,7 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
             ax.contourf(cols, rows, proj.astype(float), levels=[0.5, 1.5], colors=["0.93"])
             ax.contour(cols, rows, proj.astype(float), levels=[0.5], colors=["0.55"], linewidths=0.7)
         elif proj.any():  # a full rectangle: draw its frame
-            ax.add_patch(plt.Rectangle((cols[0] - h * _MM / 2, rows[0] - h * _MM / 2), cols[-1] - cols[0] + h * _MM,
+            ax.add_patch(Rectangle((cols[0] - h * _MM / 2, rows[0] - h * _MM / 2), cols[-1] - cols[0] + h * _MM,
                                        rows[-1] - rows[0] + h * _MM, facecolor="0.93", edgecolor="0.55",
                                        linewidth=0.7))
         # thin vessels first so that trunks stay on top
@@ -444,10 +466,10 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
         ax.set_xlabel(f"{a} [mm]")
         ax.set_ylabel(f"{b} [mm]")
     names = _INLET_NAMES.get(str(t_attrs.get("name")), ())
-    handles = [plt.Line2D([], [], color=colors(i % 10), linewidth=2,
+    handles = [Line2D([], [], color=colors(i % 10), linewidth=2,
                           label=f"{names[i]} tree" if i < len(names) else f"inlet {i} tree")
                for i in range(len(inlets))]
-    handles.append(plt.Line2D([], [], color="k", marker="*", linestyle="none", label="inlet"))
+    handles.append(Line2D([], [], color="k", marker="*", linestyle="none", label="inlet"))
     axes[0, -1].legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
     fig.suptitle(title or store.run_id, fontsize=9)
     fig.text(0.5, -0.02, f"line width ∝ vessel radius (thickest: {2 * rmax * _MM:.2g} mm diameter); grey: tissue "
@@ -465,7 +487,6 @@ def _save(fig, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
     fig.savefig(tmp, dpi=_DPI)
-    plt.close(fig)
     os.replace(tmp, path)
     return path
 
