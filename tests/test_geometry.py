@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from vasc_pipeline import engine, geometry, kernel
+from vasc_pipeline import engine, finish, geometry, kernel
 from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 from helpers import make_problem
@@ -306,7 +306,7 @@ def test_polish_never_raises_the_cost_and_leaves_the_topology_and_terminals_alon
     topology = (state.parent.copy(), state.children.copy(), state.n_downstream.copy())
     fixed = state.position[:k + n].copy()
     rng, counters = state.rng.copy(), state.counters.copy()
-    report = geometry.polish(problem, state)
+    report = finish.polish(problem, state)
     before, after = report["before"], report["after"]
     assert after["total"] <= before["total"]
     assert after["volume"] + after["power"] < before["volume"] + before["power"]  # it did something
@@ -318,19 +318,19 @@ def test_polish_never_raises_the_cost_and_leaves_the_topology_and_terminals_alon
     np.testing.assert_array_equal(state.counters, counters)
     assert after == assert_running_equals_full(problem, state)
     # A second polish has nothing left to gain.
-    again = geometry.polish(problem, state)
+    again = finish.polish(problem, state)
     assert again["after"]["total"] <= after["total"] * (1.0 + 1e-12)
 
 
 def test_descend_swaps_only_lowers_the_cost_and_keeps_a_valid_tree():
     problem, state = _hot_state("tissue=plane2d", "n_terminals=7", steps=5_000, seed=3)
-    geometry.polish(problem, state)
+    finish.polish(problem, state)
     k, n = problem.physics.n_inlets, problem.physics.n_terminals
     fixed = state.position[:k + n].copy()
     before = kernel.scaled_total_without_supply(problem.model, state)
-    applied = geometry.descend_swaps(problem, state)
+    applied = finish.descend_swaps(problem, state)
     assert_running_equals_full(problem, state)
     assert applied > 0  # a hot state's topology is far from the best
     assert kernel.scaled_total_without_supply(problem.model, state) < before
     np.testing.assert_array_equal(state.position[:k + n], fixed)
-    assert geometry.descend_swaps(problem, state) == 0  # a local minimum under single swaps
+    assert finish.descend_swaps(problem, state) == 0  # a local minimum under single swaps

@@ -287,7 +287,7 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
                               "step_bifurcation": float(state.step_size[1])}
     a = problem.config.anneal
     if a.polish:
-        from .geometry import descend_swaps, polish
+        from .finish import descend_swaps, polish
 
         rng_saved, counters_saved = state.rng.copy(), state.counters.copy()
         result = polish(problem, state)
