@@ -71,3 +71,16 @@ def test_volume_and_poiseuille_power_of_a_two_terminal_tree_by_hand():
         math.pi * r_leaf**4)
     assert result["power"] == pytest.approx(power, rel=1e-12)
     assert result["total"] == pytest.approx(result["volume"] + result["power"], rel=1e-15)
+
+
+@pytest.mark.parametrize("tissue", ["sphere", "box", "heart"])
+def test_default_voxel_size_follows_the_supply_radius_also_with_q_required(tissue):
+    """One formula for R_supply: the default voxel is R_supply / 4 whether or not q_required is given
+    (without it, up to the voxelisation error of the volume: the voxel comes before the voxels)."""
+    from helpers import make_problem
+
+    for extra, rel in (([], 2e-2), (["tissue.q_required=0.05"], 1e-12)):
+        problem = make_problem(f"tissue={tissue}", "n_terminals=200", "anneal.steps=10", *extra)
+        assert problem.tissue.voxel_size == pytest.approx(problem.physics.supply_radius / 4.0, rel=rel)
+    assert problem.physics.supply_radius == pytest.approx(
+        (3.0 * 4.16e-6 / 200 / 0.05 / (4.0 * math.pi)) ** (1.0 / 3.0), rel=1e-12)

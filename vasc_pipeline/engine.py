@@ -79,9 +79,9 @@ def node_radii(tree: Tree, physics: Physics) -> np.ndarray:
 def build_problem(config: Any) -> Problem:
     """Validate a config and build its tissue, physics and kernel model."""
     cfg = validate(to_run_config(config))
-    params = {k: v for k, v in asdict(cfg.tissue).items() if k not in ("name", "q_required")}
+    params = {k: v for k, v in asdict(cfg.tissue).items() if k != "name"}
     n = cfg.n_terminals
-    tissue = build_tissue(cfg.tissue.name, n, **params)
+    tissue = build_tissue(cfg.tissue.name, n, total_flow=cfg.physics.total_flow, **params)
     sites = None
     if cfg.terminals.path:
         sites = load_terminal_sites(cfg.terminals.path, tissue)

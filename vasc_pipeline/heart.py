@@ -62,7 +62,7 @@ import numbers
 
 import numpy as np
 
-from .tissue import Tissue, TissueError, _default_voxel_size, voxelize
+from .tissue import Tissue, TissueError, default_voxel_size, voxelize
 
 __all__ = ["heart_tissue", "heart_dimensions", "RV_EXPONENT", "DEFAULT_MASS_G", "DEFAULT_DENSITY"]
 
@@ -254,10 +254,11 @@ def _open_base(solid: np.ndarray) -> np.ndarray:
 
 
 def _build(n_terminals: int, voxel_size: float | None, mass_g: float, density: float,
-           exclude_cavities: bool = True) -> tuple[Tissue, dict]:
+           exclude_cavities: bool = True, q_required: float | None = None,
+           total_flow: float | None = None) -> tuple[Tissue, dict]:
     d = dict(_dimensions(mass_g, density))
     volume = d["volume"]
-    h = voxel_size if voxel_size is not None else _default_voxel_size(n_terminals, volume, 3)
+    h = voxel_size if voxel_size is not None else default_voxel_size(n_terminals, volume, 3, q_required, total_flow)
     lo, hi = np.array(d["bbox_lo"]), np.array(d["bbox_hi"])
     inl = np.array(d["inlets"])
     lo_all = np.minimum(lo, inl.min(axis=0))
@@ -308,10 +309,12 @@ def heart_dimensions(mass_g: float = DEFAULT_MASS_G, density: float = DEFAULT_DE
 
 
 def heart_tissue(n_terminals: int, voxel_size: float | None = None, mass_g: float = DEFAULT_MASS_G,
-                 density: float = DEFAULT_DENSITY, exclude_cavities: bool = True, **_) -> Tissue:
+                 density: float = DEFAULT_DENSITY, exclude_cavities: bool = True, q_required: float | None = None,
+                 total_flow: float | None = None, **_) -> Tissue:
     """The coronary substrate (LV + RV myocardium) with the LCA and RCA ostia as inlets.
 
-    ``voxel_size`` [m] defaults to R_supply / 4 for ``n_terminals``; ``mass_g`` and
+    ``voxel_size`` [m] defaults to R_supply / 4 for ``n_terminals`` (with ``q_required``
+    [s^-1] and ``total_flow`` [m^3 s^-1] when a required flow density is given); ``mass_g`` and
     ``density`` [kg m^-3] fix the myocardial volume the geometry is scaled to. The
     exclusion domain is the myocardium plus the ventricular cavities closed at the base
     plane ("vessels may not penetrate the ventricles"), or with ``exclude_cavities=False``
@@ -319,7 +322,7 @@ def heart_tissue(n_terminals: int, voxel_size: float | None = None, mass_g: floa
     Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
     """
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    tissue, d = _build(n_terminals, voxel_size, mass_g, density, bool(exclude_cavities))
+    tissue, d = _build(n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow)
     achieved = tissue.measure * density * 1e3
     log.info("heart tissue: %.2f g myocardium as voxelised (target %.2f g, %+.2f%%), %d voxels of %.3g mm, "
              "grid %s, LV long axis %.1f mm", achieved, mass_g, 100.0 * (achieved / mass_g - 1.0),

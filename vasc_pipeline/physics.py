@@ -151,7 +151,6 @@ def supply_radius(n_terminals: int, tissue_measure: float, ndim: int, q_required
     if ndim == 2:
         return math.sqrt(tissue_measure / n_terminals / math.pi)
     if q_required is None:
-        volume_per_terminal = tissue_measure / n_terminals
-    else:
-        volume_per_terminal = total_flow / n_terminals / q_required
+        return (3.0 * tissue_measure / n_terminals / (4.0 * math.pi)) ** (1.0 / 3.0)
+    volume_per_terminal = total_flow / n_terminals / q_required
     return (3.0 * volume_per_terminal / (4.0 * math.pi)) ** (1.0 / 3.0)

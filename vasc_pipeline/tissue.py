@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["Tissue", "TissueError", "build_tissue", "voxelize", "TISSUES"]
+from .physics import supply_radius
+
+__all__ = ["Tissue", "TissueError", "build_tissue", "voxelize", "default_voxel_size", "TISSUES"]
 
 # Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
 # ~270 voxels per supply sphere at every N (SPEC section 3).
@@ -185,32 +187,34 @@ def voxelize(inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     return inside(x, y, z).astype(np.uint8), origin
 
 
-def _default_voxel_size(n_terminals: int, measure: float, ndim: int) -> float:
-    """R_supply / 4 for the given tissue measure (volume, or area in 2-D)."""
-    if ndim == 2:
-        r_supply = math.sqrt(measure / n_terminals / math.pi)
-    else:
-        r_supply = (3.0 * measure / n_terminals / (4.0 * math.pi)) ** (1.0 / 3.0)
-    return r_supply / VOXELS_PER_SUPPLY_RADIUS
+def default_voxel_size(n_terminals: int, measure: float, ndim: int, q_required: float | None = None,
+                       total_flow: float | None = None) -> float:
+    """R_supply / 4 (SPEC section 3) for the given tissue measure (volume, or area in 2-D).
+
+    R_supply is :func:`vasc_pipeline.physics.supply_radius`, the one formula the cost uses,
+    so a given ``tissue.q_required`` sizes the voxels too.
+    """
+    return supply_radius(n_terminals, measure, ndim, q_required, total_flow) / VOXELS_PER_SUPPLY_RADIUS
 
 
-def sphere(n_terminals: int, radius: float = 0.02, voxel_size: float | None = None, **_) -> Tissue:
+def sphere(n_terminals: int, radius: float = 0.02, voxel_size: float | None = None, q_required: float | None = None,
+           total_flow: float | None = None, **_) -> Tissue:
     """A ball of tissue centred at the origin; the inlet sits just above its north pole."""
     if not radius > 0:
         raise TissueError(f"tissue.radius must be a positive length in metres, got {radius}")
-    h = voxel_size or _default_voxel_size(n_terminals, 4.0 / 3.0 * math.pi * radius**3, 3)
+    h = voxel_size or default_voxel_size(n_terminals, 4.0 / 3.0 * math.pi * radius**3, 3, q_required, total_flow)
     mask, origin = voxelize(lambda x, y, z: x**2 + y**2 + z**2 <= radius**2,
                             [-radius] * 3, [radius] * 3, h, margin=0.25 * radius)
     return Tissue("sphere", mask, h, origin, [[0.0, 0.0, radius + 0.1 * radius]], inlet_names=("root",))
 
 
 def box(n_terminals: int, size: tuple[float, float, float] = (0.04, 0.04, 0.02), voxel_size: float | None = None,
-        **_) -> Tissue:
+        q_required: float | None = None, total_flow: float | None = None, **_) -> Tissue:
     """A rectangular block [0, size] of tissue; the inlet sits above the centre of its top face."""
     size = np.asarray(size, dtype=np.float64)
     if size.shape != (3,) or np.any(size <= 0):
         raise TissueError(f"tissue.size must be three positive lengths [x, y, z] in metres, got {size.tolist()}")
-    h = voxel_size or _default_voxel_size(n_terminals, float(np.prod(size)), 3)
+    h = voxel_size or default_voxel_size(n_terminals, float(np.prod(size)), 3, q_required, total_flow)
     mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= size[0]) & (y >= 0) & (y <= size[1])
                             & (z >= 0) & (z <= size[2]), [0, 0, 0], size, h, margin=0.1 * size.min())
     inlet = [0.5 * size[0], 0.5 * size[1], size[2] + 0.05 * size.min()]
@@ -221,7 +225,7 @@ def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None
     """The paper's convergence test: a side x side square in the plane z = 0, inlet at a corner."""
     if not side > 0:
         raise TissueError(f"tissue.side must be a positive length in metres, got {side}")
-    h = voxel_size or _default_voxel_size(n_terminals, side**2, 2)
+    h = voxel_size or default_voxel_size(n_terminals, side**2, 2)
     mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= side) & (y >= 0) & (y <= side),
                             [0, 0, 0], [side, side, 0], h, ndim=2)
     return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
