@@ -259,18 +259,63 @@ def register_schema() -> None:
     ConfigStore.instance().store(name="base_config", node=RunConfig)
 
 
-def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config") -> RunConfig:
-    """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``."""
+def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config",
+            check: bool = True) -> RunConfig:
+    """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
+
+    A Hydra-level error (unknown key or group option, wrong type, unparsable override) is a
+    :class:`ConfigError` listing what is accepted; ``check=False`` skips :func:`validate`.
+    """
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
 
     register_schema()
     if GlobalHydra.instance().is_initialized():
         GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
-    return validate(to_run_config(cfg))
+    try:
+        with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+            cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise ConfigError(hydra_error_message(exc)) from exc
+    cfg = to_run_config(cfg)
+    return validate(cfg) if check else cfg
+
+
+def _schema_keys(path: list[str]) -> list[str] | None:
+    """The config keys accepted under a dotted path of the schema (None: not a section)."""
+    node: Any = RunConfig()
+    for part in path:
+        node = getattr(node, part, None)
+        if node is None and part == "sweep":  # optional group: its schema's defaults
+            node = SweepConfig()
+    return list(node.__dataclass_fields__) if hasattr(node, "__dataclass_fields__") else None
+
+
+def hydra_error_message(exc: BaseException) -> str:
+    """One paragraph for a Hydra composition error, naming the key and what is accepted."""
+    text = str(exc).split("\nConfig search path:")[0].strip()
+    if "Available options in" in text:  # an unknown group option: Hydra lists the group's options
+        head, _, options = text.partition("Available options in")
+        group, _, names = options.partition(":")
+        accepted = ", ".join(n.strip() for n in names.split() if n.strip())
+        head = head.strip().removeprefix("In 'config': ")
+        return f"{head}; accepted options for {group.strip()}: {accepted}"
+    cause = exc.__cause__ or exc
+    key = getattr(cause, "full_key", None)
+    if key:
+        parts = str(key).split(".")
+        kind = type(cause).__name__
+        if kind in ("ConfigAttributeError", "ConfigKeyError"):
+            accepted = _schema_keys(parts[:-1])
+            where = ".".join(parts[:-1]) or "the top level"
+            return (f"unknown config key {key!r}" + (f"; accepted keys at {where}: {', '.join(accepted)}"
+                                                      if accepted else ""))
+        first = str(cause).splitlines()[0]
+        return f"{key}: {first}"
+    return text.replace("\n", " ")
 
 
 # --- Sweep and cluster (the pipeline: sweep.py expands, orchestrate.py fans out) -------------

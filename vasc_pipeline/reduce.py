@@ -51,7 +51,7 @@ import xarray as xr
 
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
-from .store import RUNS_DIR, STATUS_COMPLETE, TRACE_FIELDS, RunStore, StoreError
+from .store import RUNS_DIR, STATUS_COMPLETE, TRACE_FIELDS, StoreError, verify_store, RunStore
 
 __all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "best_runs", "build_summary", "write_summary",
            "comparison_frame", "format_comparison", "reduce", "SUMMARY_NAME", "COMPARISON_CSV",
@@ -114,6 +114,7 @@ class Reduction:
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)   # store -> why it was not used
+    damaged: dict[str, str] = field(default_factory=dict)   # the skipped stores that fail their checks
     errors: dict[str, str] = field(default_factory=dict)    # stage (figures, ...) -> error text
 
 
@@ -129,24 +130,30 @@ def _float(value: Any) -> float:
         return math.nan
 
 
-def find_runs(output_dir: str | os.PathLike) -> tuple[list[RunInfo], dict[str, str]]:
+def find_runs(output_dir: str | os.PathLike,
+              damaged: dict[str, str] | None = None) -> tuple[list[RunInfo], dict[str, str]]:
     """Complete runs under ``<output_dir>/runs`` and, for every other store, why it is left out.
+
+    Every store is checked whole (:func:`vasc_pipeline.store.verify_store`: root metadata,
+    trace, and the final tree and trace against their checksums) before it is used.
 
     Returns
     -------
     runs : list of RunInfo
         Sorted by run id.
     skipped : dict
-        Store path -> reason (still running, unreadable, no final cost).
+        Store path -> reason (still running, damaged, no final cost). The damaged ones are
+        also put in ``damaged`` when given.
     """
     runs, skipped = [], {}
     root = Path(output_dir) / RUNS_DIR
     for path in sorted(root.glob("*.zarr")) if root.is_dir() else []:
         try:
-            store = RunStore.open(path, mode="r")
-            attrs = store.attrs
+            attrs = verify_store(path).attrs
         except StoreError as exc:
             skipped[str(path)] = str(exc)
+            if damaged is not None:
+                damaged[str(path)] = str(exc)
             continue
         if attrs.get("status") != STATUS_COMPLETE:
             skipped[str(path)] = f"status {attrs.get('status')!r} (not complete)"
@@ -603,18 +610,20 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
     """
     stream = stream or sys.stdout
     out = Path(output_dir)
-    runs, skipped = find_runs(out)
+    damaged: dict[str, str] = {}
+    runs, skipped = find_runs(out, damaged)
     if not runs:
-        why = f" ({len(skipped)} stores not complete or unreadable)" if skipped else ""
-        raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}{why}; "
-                             "run the sweep first (python -m vasc_pipeline +sweep=NAME output_dir=...)")
+        why = "".join(f"\n  left out: {why}" for why in skipped.values())
+        raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
+                             f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}")
     morph = {}
     summary, best, dims = build_summary(runs, morph=morph, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
     frame = comparison_frame(summary)
     csv = _write_csv(frame, out / COMPARISON_CSV)
     csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
-    result = Reduction(out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped)
+    result = Reduction(out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped,
+                       damaged=damaged)
     stream.write(format_comparison(summary) + "\n")
     if exports:
         from .export import export_run
@@ -639,6 +648,8 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
         lines.append(f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv)")
     if result.figures:
         lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")
+    for path, why in skipped.items():
+        lines.append(f"  left out: {why if path in damaged else f'{path}: {why}'}")
     for stage, error in result.errors.items():
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")
