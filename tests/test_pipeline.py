@@ -29,12 +29,11 @@ import xarray as xr
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
 from vasc_pipeline.tree import Tree, check_tree
 
-REPO = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+from helpers import ENV, REPO, TIMEOUT, cli, finish  # noqa: E402
+
 SMALL = ["+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
          "anneal.steps=300000", "anneal.trace_every=20000", "checkpoint.every_seconds=0.1",
          "cluster.dashboard_address=null"]
-TIMEOUT = 240  # seconds any one subprocess or wait may take before the test fails
 
 _references: dict[str, engine.RunResult] = {}
 
@@ -91,16 +90,6 @@ def wait_for(predicate, what: str, timeout: float = TIMEOUT, proc: subprocess.Po
             raise AssertionError(f"process exited ({proc.returncode}) before {what}:\n{proc.stderr.read()}")
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what}")
-
-
-def cli(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "vasc_pipeline", *args], env=ENV, cwd=kw.pop("cwd", REPO),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
-
-
-def finish(proc: subprocess.Popen) -> tuple[int, str]:
-    out, err = proc.communicate(timeout=TIMEOUT)
-    return proc.returncode, out + err
 
 
 def checkpointed_running_run(out: Path, n_checkpoints: int = 1) -> Path | None:

@@ -457,6 +457,7 @@ def _dask_run_job(job: Job) -> dict:
 
     worker = get_worker()
     last = [0.0]
+    worker.log_event(PROGRESS_TOPIC, {"run_id": job.run_id, "started": True})  # for the start-up watchdog
 
     def report(msg: dict) -> None:
         now = time.monotonic()
@@ -508,6 +509,7 @@ class Progress:
         self.started = time.monotonic()
         self.last_print = 0.0
         self.lock = threading.Lock()
+        self.any_started = False  # a job of this sweep began on a worker
         for j in jobs:
             if j.run_id in p.complete:
                 cost = RunStore.open(j.store, mode="r").attrs.get("cost", {}).get("total")
@@ -522,7 +524,9 @@ class Progress:
         """Handler of worker progress events (runs on the client's event-loop thread)."""
         msg = event[1] if isinstance(event, tuple) else event
         with self.lock:
-            if msg.get("run_id") in self.steps:
+            if msg.get("started"):
+                self.any_started = True
+            elif msg.get("run_id") in self.steps:
                 self.steps[msg["run_id"]] = int(msg["step"])
                 self._cost(msg["run_id"], msg.get("cost"))
 
@@ -662,8 +666,12 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
                     # Keys name the run (dashboard, logs) and this sweep, so that a client reused
                     # for a second sweep never hands back a finished task of the first.
                     token = uuid.uuid4().hex[:8]
-                    futures = {client.submit(_dask_run_job, j, key=f"vasc-run-{j.run_id}-{token}", pure=False,
-                                             retries=cfg.cluster.retries): j for j in pending}
+                    try:
+                        futures = {client.submit(_dask_run_job, j, key=f"vasc-run-{j.run_id}-{token}", pure=False,
+                                                 retries=cfg.cluster.retries): j for j in pending}
+                    except Exception as exc:  # e.g. a job Dask cannot serialise: it would never start
+                        raise SweepStartError(f"the jobs could not be submitted to the Dask scheduler "
+                                              f"({type(exc).__name__}: {exc})") from exc
                     remaining = set(futures)
                     deadline = time.monotonic() + cfg.cluster.startup_timeout
                     running = False
@@ -671,12 +679,13 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
                         done, remaining = _wait_some(wait, remaining, 1.0)
                         for fut in done:
                             _collect(fut, futures[fut], progress, result)
-                        running = running or bool(done) or _any_started(client, futures)
+                        running = running or bool(done) or progress.any_started
                         if not running and time.monotonic() > deadline:
+                            client.cancel(list(futures))
                             raise SweepStartError(
                                 f"none of the {_runs(len(futures))} started within cluster.startup_timeout="
-                                f"{cfg.cluster.startup_timeout:g} s: the scheduler never began one (waited for it to "
-                                "accept the jobs and hand one to a worker; see any Dask error above)")
+                                f"{cfg.cluster.startup_timeout:g} s: no worker began one (waited for a worker free to "
+                                "take a job; see any Dask error above)")
                         progress.tick()
                 finally:
                     client.unsubscribe_topic(PROGRESS_TOPIC)
@@ -687,16 +696,6 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
     if reduce and len(set(result["complete"]) | set(result["skipped"])) == len(p.jobs):
         result["reduction"], result["reduction_error"] = _reduce_after_sweep(p.output_dir, stream)
     return result
-
-
-def _any_started(client: Any, futures: dict) -> bool:
-    """Whether the scheduler has handed any of the sweep's tasks to a worker."""
-    keys = {f.key for f in futures}
-    try:
-        processing = client.processing()
-    except Exception:  # a scheduler that cannot answer has started nothing we know of
-        return False
-    return any(k in keys for ks in processing.values() for k in ks)
 
 
 def _wait_for_workers(client: Any, cluster: ClusterConfig, n_jobs: int) -> None:
