@@ -13,6 +13,7 @@ def make_problem(*overrides: str):
 # -- real processes: ``python -m vasc_pipeline`` as a user runs it -----------------------------
 
 import os  # noqa: E402
+import socket  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -35,3 +36,10 @@ def finish(proc: subprocess.Popen) -> tuple[int, str]:
     """Wait for a :func:`cli` process: (exit status, stdout + stderr)."""
     out, err = proc.communicate(timeout=TIMEOUT)
     return proc.returncode, out + err
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (for a scheduler started by a test)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

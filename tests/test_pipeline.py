@@ -14,7 +14,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -29,7 +28,7 @@ import xarray as xr
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
 from vasc_pipeline.tree import Tree, check_tree
 
-from helpers import ENV, REPO, TIMEOUT, cli, finish  # noqa: E402
+from helpers import ENV, REPO, TIMEOUT, cli, finish, free_port  # noqa: E402
 
 SMALL = ["+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
          "anneal.steps=300000", "anneal.trace_every=20000", "checkpoint.every_seconds=0.1",
@@ -184,16 +183,10 @@ def test_a_killed_worker_resumes_its_job_from_the_checkpoint(tmp_path):
 # -- an existing scheduler -------------------------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_an_existing_scheduler_by_address_gives_the_same_results(tmp_path):
     from distributed import Client
 
-    port = _free_port()
+    port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     dask_cli = [sys.executable, "-m", "dask"]
     procs = [subprocess.Popen([*dask_cli, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],

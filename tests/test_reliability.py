@@ -10,7 +10,6 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import io
-import json
 import re
 import socket
 import subprocess
@@ -23,7 +22,7 @@ import numpy as np
 import pytest
 import zarr
 
-from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish
+from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish, free_port
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
 from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
@@ -127,20 +126,17 @@ def test_4_upper_bounds_are_validated(override, message, tmp_path):
         sweep.expand(cfg)  # the grid's axes (what orchestrate.plan checks before any store or job)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_4_a_scheduler_without_workers_stops_after_the_startup_timeout(tmp_path):
-    port = _free_port()
+    port = free_port()
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                   "--port", str(port), "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + TIMEOUT
-        while socket.socket().connect_ex(("127.0.0.1", port)) != 0:
+        while True:
+            with socket.socket() as probe:
+                if probe.connect_ex(("127.0.0.1", port)) == 0:
+                    break
             assert time.monotonic() < deadline and scheduler.poll() is None, "scheduler did not start"
             time.sleep(0.1)
         started = time.monotonic()

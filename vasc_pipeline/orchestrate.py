@@ -45,7 +45,8 @@ from .store import (STATUS_COMPLETE, RUNS_DIR, SWEEP_AXES, RunStore, StoreError,
 from .sweep import Job, cell_id, expand
 
 __all__ = ["main", "run_sweep", "reduce_stage", "plan", "Plan", "output_dir_lock", "OutputDirLocked", "open_client", "check_cluster",
-           "check_output_dir", "OutputDirCallback",
+           "check_output_dir", "OutputDirCallback", "SweepStartError", "inspect_stores", "check_one_configuration",
+           "slurm_cluster", "has_bokeh",
            "compile_kernels", "LOCK_NAME", "PROGRESS_TOPIC"]
 
 LOCK_NAME = ".vasc_pipeline.lock"
@@ -618,12 +619,15 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
     dict
         ``output_dir``, ``runs`` (job summaries of this call, see
         :func:`vasc_pipeline.job.run_job`), ``complete``, ``resumed``, ``skipped`` (run ids),
-        ``failed`` ({run_id: error text}), ``wall_seconds``, ``reduction`` (a
+        ``failed`` ({run_id: error text}), ``deterministic`` (the failed run ids whose job
+        raised: a rerun fails the same way), ``damaged`` ({run_id: what is wrong with its
+        store}, left out), ``wall_seconds``, ``reduction`` (a
         :class:`vasc_pipeline.reduce.Reduction`, or None when not reduced) and
         ``reduction_error`` (text, or None).
 
     Raises ConfigError / TissueError / TreeError / OSError (incl. :class:`OutputDirLocked`)
-    before any job starts.
+    before any job starts, and :class:`SweepStartError` when no worker, or no job, started
+    within ``cluster.startup_timeout``. With ``cluster.dry_run`` it only prints the plan.
     """
     from distributed import wait
 
@@ -653,8 +657,9 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
                 if client is None:
                     client = stack.enter_context(open_client(cfg.cluster, len(pending), p.output_dir))
                 _wait_for_workers(client, cfg.cluster, len(pending))
-                dashboard = getattr(client, "dashboard_link", None) if (cfg.cluster.dashboard_address or
-                                                                         cfg.cluster.address) and has_bokeh() else None
+                # An existing scheduler draws its own dashboard; ours only with bokeh here.
+                dashboard = getattr(client, "dashboard_link", None) if cfg.cluster.address or (
+                    cfg.cluster.dashboard_address and has_bokeh()) else None
                 progress = Progress(p, stream, progress_interval, dashboard)
                 if dashboard:
                     stream.write(f"vasc_pipeline: Dask dashboard at {dashboard}\n")
@@ -813,8 +818,8 @@ def _print_summary(result: dict, p: Plan, stream: TextIO) -> None:
                      "is a pure function of its configuration and seed, so rerunning fails the same way. Change the "
                      "configuration (the error above says what failed) or report it as a bug.")
     if n_failed > len(deterministic):
-        lines.append("  Rerun the same command to retry the other failed runs (finished runs are skipped; the "
-                     "others resume from their last checkpoint).")
+        lines.append(f"  Rerun the same command to retry the {'other ' if deterministic else ''}failed runs (finished "
+                     "runs are skipped; the others resume from their last checkpoint).")
     for run_id, why in result.get("damaged", {}).items():
         lines.append(f"  left out: {run_id}: {why}")
     lines.append(f"Results: {p.output_dir / RUNS_DIR}/<run_id>.zarr (xarray.open_zarr(path, group='trace'); "
