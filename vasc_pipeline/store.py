@@ -26,6 +26,9 @@ flip one key (the root ``zarr.json``, i.e. the root attributes) that makes them 
 - On load every checkpoint's arrays are checked against its manifest (a missing chunk reads
   back as fill values, a truncated one fails to decode); a bad checkpoint is skipped for the
   previous good one with a :class:`CheckpointWarning`.
+- A complete run's final tree and committed trace carry CRC-32 checksums (root attribute
+  ``checksums``, written with ``status="complete"``); :func:`verify_store` checks a whole store
+  before a sweep or the reduction uses it and names a damaged one (:class:`StoreDamaged`).
 
 One writer per store: :func:`run_lock` holds an ``fcntl`` lock on ``runs/.locks/<run_id>.lock``
 while a job writes (a worker the scheduler gave up on may still be running).
@@ -50,8 +53,8 @@ import zarr
 
 from .config import ConfigError
 
-__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "StoreDamaged", "verify_store", "is_empty_leftover", "run_path", "run_lock", "config_hash",
-           "hashed_config", "config_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
+__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "StoreDamaged", "verify_store",
+           "is_empty_leftover", "run_path", "run_lock", "config_hash", "hashed_config", "config_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
 
 RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
