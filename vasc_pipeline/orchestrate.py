@@ -352,15 +352,20 @@ def open_client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLi
     ``output_dir`` (shared with the workers): where SLURM workers read temporary TLS certificates.
     """
     check_cluster(cluster)
-    # Under Hydra the root logger prints INFO: keep Dask's routine chatter (workers starting,
-    # closing) out of the progress output; its warnings and errors still show.
+    with _quiet_dask(), _client(cluster, n_jobs, output_dir) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """Under Hydra the root logger prints INFO: keep Dask's routine chatter (workers starting,
+    closing) out of the progress output; its warnings and errors still show."""
     dask_log = logging.getLogger("distributed")
     level = dask_log.level
     if dask_log.getEffectiveLevel() < logging.WARNING:
         dask_log.setLevel(logging.WARNING)
     try:
-        with _client(cluster, n_jobs, output_dir) as client:
-            yield client
+        yield
     finally:
         dask_log.setLevel(level)
 
@@ -727,11 +732,13 @@ def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
     lines = [f"vasc_pipeline: dry run: {_runs(len(p.jobs))} would run into {p.output_dir}:"]
     lines += [f"  {j.run_id} ({p.total_steps[j.run_id]} proposed moves)" for j in p.jobs]
     if cfg.cluster.name == "slurm":
-        cl = slurm_cluster(cfg.cluster, len(p.jobs), None)
-        try:
-            lines += ["SLURM job script (one per cluster.slurm.cores workers; not submitted):", cl.job_script()]
-        finally:
-            cl.close()
+        with _quiet_dask():
+            cl = slurm_cluster(cfg.cluster, len(p.jobs), check_output_dir(p.output_dir))
+            try:
+                lines += ["SLURM job script (one per cluster.slurm.cores workers; not submitted; temporary TLS files it "
+                          "names exist only while a sweep runs):", cl.job_script()]
+            finally:
+                cl.close()
     stream.write("\n".join(lines) + "\n")
     stream.flush()
     return {"output_dir": str(p.output_dir), "runs": [], "complete": [], "resumed": [], "skipped": [],
