@@ -377,7 +377,7 @@ def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
     code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "cluster=slurm", "cluster.dry_run=true",
                               "cluster.slurm.walltime=01:00:00", "cluster.dashboard_address=null"))
     assert code == 0, output
-    assert "dry run: 1 run would run" in output and "sphere-N16-mb641.3-s0 (2000 proposed moves)" in output
+    assert "dry run: 1 run of 1 would run" in output and "sphere-N16-mb641.3-s0 (2000 proposed moves; new)" in output
     assert "#SBATCH -t 01:00:00" in output and "distributed.cli.dask_worker" in output, output
     assert not (tmp_path / "runs").exists()
 

@@ -729,8 +729,13 @@ def _wait_for_workers(client: Any, cluster: ClusterConfig, n_jobs: int) -> None:
 
 def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
     """cluster.dry_run: print the planned runs (and SLURM's job script); no store, no job, no output_dir lock."""
-    lines = [f"vasc_pipeline: dry run: {_runs(len(p.jobs))} would run into {p.output_dir}:"]
-    lines += [f"  {j.run_id} ({p.total_steps[j.run_id]} proposed moves)" for j in p.jobs]
+    inspect_stores(p)  # read-only: what a sweep would skip, resume or refuse
+    lines = [f"vasc_pipeline: dry run: {_runs(len(p.pending))} of {len(p.jobs)} would run into {p.output_dir}:"]
+    for j in p.jobs:
+        what = ("complete: skipped" if j.run_id in p.complete else f"left out: {p.damaged[j.run_id]}"
+                if j.run_id in p.damaged else f"resumes from step {p.started[j.run_id]}" if j.run_id in p.started
+                else "new")
+        lines.append(f"  {j.run_id} ({p.total_steps[j.run_id]} proposed moves; {what})")
     if cfg.cluster.name == "slurm":
         with _quiet_dask():
             cl = slurm_cluster(cfg.cluster, len(p.jobs), check_output_dir(p.output_dir))
