@@ -74,6 +74,19 @@ def test_1_runs_of_another_configuration_are_refused_naming_the_keys(tmp_path):
     assert p.complete == {"sphere-N16-mb641.3-s0"} and not p.damaged
 
 
+def test_1_a_directory_already_mixed_is_never_reduced(tmp_path):
+    run_in_process(tmp_path)
+    (other,) = sweep.expand(tiny(tmp_path / "elsewhere", "seed=1", "physics.gamma=3.0"))
+    job.run_job(other)  # mixed by hand: moved in from another output_dir
+    Path(other.store).rename(store.run_path(tmp_path, other.run_id))
+    log = io.StringIO()
+    assert orchestrate.reduce_stage(tiny(tmp_path, "+stage=reduce"), stream=log) == 2
+    assert "holds runs of different configurations, which are never reduced together" in log.getvalue()
+    assert "sphere-N16-mb641.3-s1 differs from sphere-N16-mb641.3-s0 in physics.gamma: 3.0 (stored) vs 2.1" in \
+        log.getvalue(), log.getvalue()
+    assert not (tmp_path / "summary.zarr").exists()
+
+
 # -- 2. seeds validated alike ----------------------------------------------------------------
 
 

@@ -51,9 +51,10 @@ import xarray as xr
 
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
-from .store import RUNS_DIR, STATUS_COMPLETE, TRACE_FIELDS, StoreError, verify_store, RunStore
+from .store import (RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, TRACE_FIELDS, RunStore, StoreError, config_differences,
+                    verify_store)
 
-__all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "best_runs", "build_summary", "write_summary",
+__all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "check_one_configuration", "best_runs", "build_summary", "write_summary",
            "comparison_frame", "format_comparison", "reduce", "SUMMARY_NAME", "COMPARISON_CSV",
            "COMPARISON_SUMMARY_CSV", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
 
@@ -94,6 +95,7 @@ class RunInfo:
     wall_seconds: float
     cost: dict[str, float]
     physics: dict[str, Any]
+    config: dict[str, Any] = field(default_factory=dict, repr=False)   # the run's stored config
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -170,8 +172,34 @@ def find_runs(output_dir: str | os.PathLike,
             m_b=float(coords.get("m_b", config.get("physics", {}).get("m_b"))), seed=int(attrs["seed"]),
             steps=None if coords.get("steps") is None else int(coords["steps"]),
             steps_done=int(attrs.get("steps_done", 0)), wall_seconds=_float(attrs.get("wall_seconds")),
-            cost=cost, physics=dict(attrs.get("physics") or {})))
+            cost=cost, physics=dict(attrs.get("physics") or {}), config=config))
     return sorted(runs, key=lambda r: r.run_id), skipped
+
+
+def check_one_configuration(output_dir: str | os.PathLike, runs: list[RunInfo]) -> None:
+    """Refuse (ReductionError) runs of different configurations in one output_dir.
+
+    The sweep refuses to write them (``orchestrate.check_one_configuration``); this catches
+    directories mixed by hand or by an older version, whose best seed per cell would otherwise
+    be picked across different physics or schedules.
+    """
+    first, problems = runs[0], []
+    for r in runs[1:]:
+        diff = config_differences(r.config, first.config, ignore=SWEEP_AXES)
+        if diff:
+            problems.append(f"{r.run_id} differs from {first.run_id} in {'; '.join(diff)}")
+    cells: dict[tuple, RunInfo] = {}
+    for r in runs:
+        other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps), r)
+        if other.steps_done != r.steps_done:
+            problems.append(f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell "
+                            f"{other.steps_done}")
+    if problems:
+        raise ReductionError(
+            f"output_dir {str(output_dir)!r} holds runs of different configurations, which are never reduced together "
+            f"(every run of an output_dir shares its configuration except the sweep axes {', '.join(SWEEP_AXES)}, "
+            f"and one cell's runs their step count): {'; '.join(problems)}. Move the runs of one configuration to "
+            "an output_dir of their own and reduce each.")
 
 
 def _cell_dims(runs: list[RunInfo]) -> list[str]:
@@ -616,6 +644,7 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
         why = "".join(f"\n  left out: {why}" for why in skipped.values())
         raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
                              f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}")
+    check_one_configuration(out, runs)
     morph = {}
     summary, best, dims = build_summary(runs, morph=morph, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
