@@ -250,7 +250,7 @@ def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = N
                 head = fh.read(64)
             if not head.startswith(b"\x93NUMPY"):  # np.load would call anything else "pickled data"
                 kind = "a text file" if head and all(32 <= b < 127 or b in b"\t\r\n" for b in head) else \
-                    "not a NumPy file"
+                    "a binary file of another format"
                 raise TissueError(f"tissue.path: {str(p)!r} is {kind}, not a NumPy .npy array (it starts with "
                                   f"{head[:24]!r}); save the mask with numpy.save, or give a Zarr array")
             data = np.load(p, allow_pickle=False)
