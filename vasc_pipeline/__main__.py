@@ -26,5 +26,22 @@ def _main(cfg) -> None:
         sys.exit(status)
 
 
+def _check_overrides(args: list[str]) -> None:
+    """Hydra-level errors (unknown key or group option, wrong type) exit 2 listing what is accepted.
+
+    Hydra itself reports them with status 1, which the README reserves for failed runs. Only
+    plain overrides are checked here; Hydra's own flags (--help, --cfg, ...) go to Hydra.
+    """
+    if any(a.startswith("-") for a in args):
+        return
+    try:
+        config.compose(args, check=False)
+    except config.ConfigError as exc:
+        sys.stderr.write(f"vasc_pipeline: error: {exc}\nNothing was run; existing results were left as they "
+                         "were. python -m vasc_pipeline --help lists the config groups and keys.\n")
+        sys.exit(2)
+
+
 if __name__ == "__main__":
+    _check_overrides(sys.argv[1:])
     _main()

@@ -24,6 +24,11 @@ _PACKAGE_DIR = Path(__file__).resolve().parent
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
 STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
+# Upper bounds, so that a typo'd exponent is refused here rather than overflowing after dispatch
+# (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
+MAX_STEPS = 10**15
+MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
+SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
 # Keys added after runs were already stored, with the value that does what the code did
@@ -167,6 +172,23 @@ def _positive(name: str, value: float) -> None:
         raise ConfigError(f"{name} must be a finite number > 0, got {value}")
 
 
+def seed_ok(value: Any) -> bool:
+    """A valid seed (``seed`` and every ``sweep.seeds`` entry): an integer in [0, 2^63)."""
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**63
+
+
+def _check_finite(node: Any, name: str) -> None:
+    """Every float anywhere in the config must be finite (NaN and inf pass every range check)."""
+    if hasattr(node, "__dataclass_fields__"):
+        for key in node.__dataclass_fields__:
+            _check_finite(getattr(node, key), f"{name}.{key}" if name else key)
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            _check_finite(value, f"{name}[{i}]")
+    elif isinstance(node, float) and not math.isfinite(node):
+        raise ConfigError(f"{name} must be a finite number, got {node}")
+
+
 def scheduled_steps(cfg: RunConfig) -> int:
     """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default
     ``steps_at_1000 * (N / 1000)^steps_exponent``."""
@@ -184,6 +206,15 @@ def validate(cfg: RunConfig) -> RunConfig:
     """Check every range the model needs; raise :class:`ConfigError` naming the field."""
     from .tissue import TISSUES
 
+    _check_finite(cfg, "")
+    if not str(cfg.output_dir).strip():
+        raise ConfigError("output_dir must name a directory, got an empty string; give one with output_dir=...")
+    if not seed_ok(cfg.seed):
+        raise ConfigError(f"seed must be {SEED_ACCEPTED}, got {cfg.seed!r}")
+    if cfg.sweep is not None:
+        for i, seed in enumerate(cfg.sweep.seeds or ()):
+            if not seed_ok(seed):
+                raise ConfigError(f"sweep.seeds[{i}] must be {SEED_ACCEPTED}, got {seed!r}")
     if not isinstance(cfg.n_terminals, int) or cfg.n_terminals < 2:
         raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
     if cfg.tissue.name not in TISSUES:
@@ -224,9 +255,14 @@ def validate(cfg: RunConfig) -> RunConfig:
             raise ConfigError(f"anneal.{name} must be an integer >= 1, got {getattr(a, name)}")
     if not 0.0 <= a.p_local <= 1.0:
         raise ConfigError(f"anneal.p_local must lie in [0, 1], got {a.p_local}")
-    if a.steps is not None and (not isinstance(a.steps, int) or a.steps < 1):
-        raise ConfigError(f"anneal.steps must be an integer >= 1 (proposed moves per run), got {a.steps}")
+    if a.steps is not None and (not isinstance(a.steps, int) or not 1 <= a.steps <= MAX_STEPS):
+        raise ConfigError(f"anneal.steps must be an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run), "
+                          f"got {a.steps}")
     _positive("anneal.steps_at_1000", a.steps_at_1000)
+    if a.steps is None and scheduled_steps(cfg) > MAX_STEPS:
+        raise ConfigError(f"anneal.steps_at_1000={a.steps_at_1000:g} schedules {scheduled_steps(cfg):.3g} proposed "
+                          f"moves at n_terminals={cfg.n_terminals}, more than {MAX_STEPS:.0e}; lower it or set "
+                          "anneal.steps")
     if not (0.0 <= a.steps_exponent <= 4.0):
         raise ConfigError(f"anneal.steps_exponent must lie in [0, 4], got {a.steps_exponent}")
     if not (0.0 <= a.packing_steps_per_terminal < math.inf):
@@ -246,13 +282,16 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"anneal.p_swap must lie in [0, 1], got {a.p_swap}")
     _positive("anneal.step_terminal", a.step_terminal)
     _positive("anneal.step_bifurcation", a.step_bifurcation)
-    if not isinstance(a.trace_every, int) or a.trace_every < 1:
-        raise ConfigError(f"anneal.trace_every must be an integer >= 1, got {a.trace_every}")
+    if not isinstance(a.trace_every, int) or not 1 <= a.trace_every <= MAX_STEPS:
+        raise ConfigError(f"anneal.trace_every must be an integer in [1, {MAX_STEPS:.0e}], got {a.trace_every}")
     if cfg.tissue.voxel_size is not None:
         _positive("tissue.voxel_size", cfg.tissue.voxel_size)
     if cfg.tissue.q_required is not None:
         _positive("tissue.q_required", cfg.tissue.q_required)
     _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)
+    if cfg.checkpoint.every_seconds > MAX_CHECKPOINT_SECONDS:
+        raise ConfigError(f"checkpoint.every_seconds must be <= {MAX_CHECKPOINT_SECONDS:g} (a week), got "
+                          f"{cfg.checkpoint.every_seconds}")
     if cfg.stage not in STAGES:
         raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
     if cfg.terminals.fixed and not cfg.terminals.path:
@@ -267,18 +306,63 @@ def register_schema() -> None:
     ConfigStore.instance().store(name="base_config", node=RunConfig)
 
 
-def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config") -> RunConfig:
-    """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``."""
+def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config",
+            check: bool = True) -> RunConfig:
+    """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
+
+    A Hydra-level error (unknown key or group option, wrong type, unparsable override) is a
+    :class:`ConfigError` listing what is accepted; ``check=False`` skips :func:`validate`.
+    """
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
 
     register_schema()
     if GlobalHydra.instance().is_initialized():
         GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
-    return validate(to_run_config(cfg))
+    try:
+        with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+            cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise ConfigError(hydra_error_message(exc)) from exc
+    cfg = to_run_config(cfg)
+    return validate(cfg) if check else cfg
+
+
+def _schema_keys(path: list[str]) -> list[str] | None:
+    """The config keys accepted under a dotted path of the schema (None: not a section)."""
+    node: Any = RunConfig()
+    for part in path:
+        node = getattr(node, part, None)
+        if node is None and part == "sweep":  # optional group: its schema's defaults
+            node = SweepConfig()
+    return list(node.__dataclass_fields__) if hasattr(node, "__dataclass_fields__") else None
+
+
+def hydra_error_message(exc: BaseException) -> str:
+    """One paragraph for a Hydra composition error, naming the key and what is accepted."""
+    text = str(exc).split("\nConfig search path:")[0].strip()
+    if "Available options in" in text:  # an unknown group option: Hydra lists the group's options
+        head, _, options = text.partition("Available options in")
+        group, _, names = options.partition(":")
+        accepted = ", ".join(n.strip() for n in names.split() if n.strip())
+        head = head.strip().removeprefix("In 'config': ")
+        return f"{head}; accepted options for {group.strip()}: {accepted}"
+    cause = exc.__cause__ or exc
+    key = getattr(cause, "full_key", None)
+    if key:
+        parts = str(key).split(".")
+        kind = type(cause).__name__
+        if kind in ("ConfigAttributeError", "ConfigKeyError"):
+            accepted = _schema_keys(parts[:-1])
+            where = ".".join(parts[:-1]) or "the top level"
+            return (f"unknown config key {key!r}" + (f"; accepted keys at {where}: {', '.join(accepted)}"
+                                                      if accepted else ""))
+        first = str(cause).splitlines()[0]
+        return f"{key}: {first}"
+    return text.replace("\n", " ")
 
 
 # --- Sweep and cluster (the pipeline: sweep.py expands, orchestrate.py fans out) -------------
@@ -334,6 +418,9 @@ class ClusterConfig:
     address: Optional[str] = None             # tcp://host:8786 or tls://host:8786 of an existing scheduler
     dashboard_address: Optional[str] = "127.0.0.1:8787"  # local/slurm dashboard; None: no dashboard
     retries: int = 2                          # resubmissions of a job whose worker died or that raised
+    startup_timeout: float = 300.0            # s to wait for the first worker (and for the first job to start)
+    allow_insecure: bool = False              # slurm without cluster.tls files: plain tcp instead of temporary TLS
+    dry_run: bool = False                     # print the planned runs (and the SLURM job script); run nothing
     tls: TLSConfig = field(default_factory=TLSConfig)
     slurm: SlurmConfig = field(default_factory=SlurmConfig)
 

@@ -25,7 +25,7 @@ from .config import ConfigError, RunConfig, packing_steps, scheduled_steps, to_r
 from .costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, full_costs
 from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
-from .tissue import Tissue, build_tissue
+from .tissue import Tissue, TissueError, build_tissue
 from .tree import Tree, TreeError, load_terminal_sites, random_tree
 
 __all__ = ["Problem", "RunResult", "build_problem", "initial_state", "calibrate_schedule", "run_block", "finish",
@@ -111,6 +111,12 @@ def build_problem(config: Any) -> Problem:
         raise ConfigError(f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
                           "cells (at most 2e7); use a larger value (in R_supply, default 1)")
     rho = physics.supply_radius / tissue.voxel_size
+    if rho < 1.0:  # the supply term counts voxels within R_supply of a terminal: it needs several
+        raise TissueError(
+            f"tissue.voxel_size={tissue.voxel_size:.4g} m is coarser than the supply sphere (R_supply = "
+            f"{physics.supply_radius:.4g} m at n_terminals={n}; the grid is {tissue.shape[2]} x {tissue.shape[1]} x "
+            f"{tissue.shape[0]} voxels): the largest accepted voxel_size is R_supply. Set a smaller "
+            "tissue.voxel_size, or leave it unset (R_supply / 4)")
     sphere_voxels = math.pi * rho ** 2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho ** 3  # C_s scale of one move
     model = kernel.Model(
         n_inlets=k, n_terminals=n, tables=cost_tables(physics).array,

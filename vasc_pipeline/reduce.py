@@ -52,9 +52,10 @@ import xarray as xr
 
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
-from .store import RUNS_DIR, STATUS_COMPLETE, TRACE_FIELDS, RunStore, StoreError
+from .store import (RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, TRACE_FIELDS, RunStore, StoreError, config_differences,
+                    verify_store)
 
-__all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "best_runs", "build_summary", "write_summary",
+__all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "check_one_configuration", "best_runs", "build_summary", "write_summary",
            "comparison_frame", "format_comparison", "reduce", "SUMMARY_NAME", "COMPARISON_CSV",
            "COMPARISON_SUMMARY_CSV", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
 
@@ -96,6 +97,7 @@ class RunInfo:
     cost: dict[str, float]
     physics: dict[str, Any]
     statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
+    config: dict[str, Any] = field(default_factory=dict, repr=False)   # the run's stored config
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -116,6 +118,7 @@ class Reduction:
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)   # store -> why it was not used
+    damaged: dict[str, str] = field(default_factory=dict)   # the skipped stores that fail their checks
     errors: dict[str, str] = field(default_factory=dict)    # stage (figures, ...) -> error text
 
 
@@ -131,24 +134,30 @@ def _float(value: Any) -> float:
         return math.nan
 
 
-def find_runs(output_dir: str | os.PathLike) -> tuple[list[RunInfo], dict[str, str]]:
+def find_runs(output_dir: str | os.PathLike,
+              damaged: dict[str, str] | None = None) -> tuple[list[RunInfo], dict[str, str]]:
     """Complete runs under ``<output_dir>/runs`` and, for every other store, why it is left out.
+
+    Every store is checked whole (:func:`vasc_pipeline.store.verify_store`: root metadata,
+    trace, and the final tree and trace against their checksums) before it is used.
 
     Returns
     -------
     runs : list of RunInfo
         Sorted by run id.
     skipped : dict
-        Store path -> reason (still running, unreadable, no final cost).
+        Store path -> reason (still running, damaged, no final cost). The damaged ones are
+        also put in ``damaged`` when given.
     """
     runs, skipped = [], {}
     root = Path(output_dir) / RUNS_DIR
     for path in sorted(root.glob("*.zarr")) if root.is_dir() else []:
         try:
-            store = RunStore.open(path, mode="r")
-            attrs = store.attrs
+            attrs = verify_store(path).attrs
         except StoreError as exc:
             skipped[str(path)] = str(exc)
+            if damaged is not None:
+                damaged[str(path)] = str(exc)
             continue
         if attrs.get("status") != STATUS_COMPLETE:
             skipped[str(path)] = f"status {attrs.get('status')!r} (not complete)"
@@ -165,9 +174,35 @@ def find_runs(output_dir: str | os.PathLike) -> tuple[list[RunInfo], dict[str, s
             m_b=float(coords.get("m_b", config.get("physics", {}).get("m_b"))), seed=int(attrs["seed"]),
             steps=None if coords.get("steps") is None else int(coords["steps"]),
             steps_done=int(attrs.get("steps_done", 0)), wall_seconds=_float(attrs.get("wall_seconds")),
-            cost=cost, physics=dict(attrs.get("physics") or {}),
+            cost=cost, physics=dict(attrs.get("physics") or {}), config=config,
             statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()}))
     return sorted(runs, key=lambda r: r.run_id), skipped
+
+
+def check_one_configuration(output_dir: str | os.PathLike, runs: list[RunInfo]) -> None:
+    """Refuse (ReductionError) runs of different configurations in one output_dir.
+
+    The sweep refuses to write them (``orchestrate.check_one_configuration``); this catches
+    directories mixed by hand or by an older version, whose best seed per cell would otherwise
+    be picked across different physics or schedules.
+    """
+    first, problems = runs[0], []
+    for r in runs[1:]:
+        diff = config_differences(r.config, first.config, ignore=SWEEP_AXES)
+        if diff:
+            problems.append(f"{r.run_id} differs from {first.run_id} in {'; '.join(diff)}")
+    cells: dict[tuple, RunInfo] = {}
+    for r in runs:
+        other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps), r)
+        if other.steps_done != r.steps_done:
+            problems.append(f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell "
+                            f"{other.steps_done}")
+    if problems:
+        raise ReductionError(
+            f"output_dir {str(output_dir)!r} holds runs of different configurations, which are never reduced together "
+            f"(every run of an output_dir shares its configuration except the sweep axes {', '.join(SWEEP_AXES)}, "
+            f"and one cell's runs their step count): {'; '.join(problems)}. Move the runs of one configuration to "
+            "an output_dir of their own and reduce each.")
 
 
 def _cell_dims(runs: list[RunInfo]) -> list[str]:
@@ -611,18 +646,21 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
     """
     stream = stream or sys.stdout
     out = Path(output_dir)
-    runs, skipped = find_runs(out)
+    damaged: dict[str, str] = {}
+    runs, skipped = find_runs(out, damaged)
     if not runs:
-        why = f" ({len(skipped)} stores not complete or unreadable)" if skipped else ""
-        raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}{why}; "
-                             "run the sweep first (python -m vasc_pipeline +sweep=NAME output_dir=...)")
+        why = "".join(f"\n  left out: {why}" for why in skipped.values())
+        raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
+                             f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}")
+    check_one_configuration(out, runs)
     morph = {}
     summary, best, dims = build_summary(runs, morph=morph, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
     frame = comparison_frame(summary)
     csv = _write_csv(frame, out / COMPARISON_CSV)
     csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
-    result = Reduction(out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped)
+    result = Reduction(out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped,
+                       damaged=damaged)
     stream.write(format_comparison(summary) + "\n")
     if exports:
         from .export import export_run
@@ -647,6 +685,8 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
         lines.append(f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv)")
     if result.figures:
         lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")
+    for path, why in skipped.items():
+        lines.append(f"  left out: {why if path in damaged else f'{path}: {why}'}")
     for stage, error in result.errors.items():
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")

@@ -26,6 +26,9 @@ flip one key (the root ``zarr.json``, i.e. the root attributes) that makes them 
 - On load every checkpoint's arrays are checked against its manifest (a missing chunk reads
   back as fill values, a truncated one fails to decode); a bad checkpoint is skipped for the
   previous good one with a :class:`CheckpointWarning`.
+- A complete run's final tree and committed trace carry CRC-32 checksums (root attribute
+  ``checksums``, written with ``status="complete"``); :func:`verify_store` checks a whole store
+  before a sweep or the reduction uses it and names a damaged one (:class:`StoreDamaged`).
 
 One writer per store: :func:`run_lock` holds an ``fcntl`` lock on ``runs/.locks/<run_id>.lock``
 while a job writes (a worker the scheduler gave up on may still be running).
@@ -50,8 +53,8 @@ import zarr
 
 from .config import KEYS_ADDED_LATER, ConfigError
 
-__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "run_path", "run_lock", "config_hash",
-           "hashed_config", "config_differences", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
+__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "StoreDamaged", "verify_store",
+           "is_empty_leftover", "run_path", "run_lock", "config_hash", "hashed_config", "config_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
 
 RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
@@ -62,6 +65,9 @@ TRACE_CHUNK = 4096          # records per trace chunk: a few appends per chunk, 
 # Config sections that do not change a run's result: where it is written, how often it
 # checkpoints, and how the sweep/cluster around it is organised. Everything else does.
 _UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
+# The sweep axes (flattened config keys): the only settings in which the runs of one output_dir
+# may differ; everything else in it is one configuration (a cell is never a mix of physics).
+SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")
 
 # (name, dtype, units, long_name) of the trace variables; "step" is the dimension.
 TRACE_FIELDS = (
@@ -82,8 +88,39 @@ class StoreError(OSError):
     """A run store that cannot be read or written; the message names the path."""
 
 
+class StoreDamaged(StoreError):
+    """A run store that fails its checks (:func:`verify_store`): the message says what is wrong and what to do."""
+
+
 class CheckpointWarning(UserWarning):
     """A checkpoint failed its checks and an older one (or a fresh start) is used instead."""
+
+
+def is_empty_leftover(path: str | os.PathLike) -> bool:
+    """An empty directory where a store was about to be created (a crash before its zarr.json)."""
+    path = Path(path)
+    return path.is_dir() and not any(path.iterdir())
+
+
+def verify_store(path: str | os.PathLike) -> "RunStore":
+    """Open a run store read-only and check it whole, or raise :class:`StoreDamaged`.
+
+    Checked: a readable ``zarr.json`` of this format; the committed trace records decode
+    (every store) and, for a complete one, the final tree and trace match the CRC-32
+    recorded with them (stores written before checksums existed: they decode). Checkpoints
+    are not checked here: a bad one is skipped for the previous one when the run resumes.
+    The message names the store, what is wrong, and what to do.
+    """
+    path = Path(path)
+    try:
+        store = RunStore.open(path, mode="r")
+        store.verify()
+    except Exception as exc:
+        what = str(exc) if isinstance(exc, StoreError) else f"{type(exc).__name__}: {exc}"
+        raise StoreDamaged(f"run store {str(path)!r} is damaged: {what}. Move it aside (e.g. mv {path} "
+                           f"{path}.damaged) and rerun the same command to run it again from the start; the "
+                           "other runs are not affected") from exc
+    return store
 
 
 def run_path(output_dir: str | os.PathLike, run_id: str) -> Path:
@@ -149,11 +186,13 @@ def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
     return {prefix[:-1]: tree}
 
 
-def config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
-    """Human-readable ``key: stored -> requested`` lines for every result-determining difference."""
+def config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any],
+                       ignore: tuple[str, ...] = ()) -> list[str]:
+    """Human-readable ``key: stored -> requested`` lines for every result-determining difference
+    (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
     a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
     return [f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
-            for k in sorted(set(a) | set(b)) if a.get(k, "<absent>") != b.get(k, "<absent>")]
+            for k in sorted(set(a) | set(b)) if k not in ignore and a.get(k, "<absent>") != b.get(k, "<absent>")]
 
 
 def _jsonable(value: Any) -> Any:
@@ -219,7 +258,7 @@ class RunStore:
         """Open an existing store; :class:`StoreError` names the path if it is not a readable run store."""
         path = Path(path)
         if not (path / "zarr.json").is_file():
-            raise StoreError(f"{str(path)!r} is not a run store (no zarr.json)")
+            raise StoreError(f"{str(path)!r} is not a run store (no zarr.json: its root metadata is missing)")
         try:
             # Finished stores carry consolidated metadata; unfinished ones must be read live.
             group = zarr.open_group(str(path), mode=mode, zarr_format=3)
@@ -341,6 +380,31 @@ class RunStore:
         n = self.trace_length
         return {name: self.group[f"trace/{name}"][:n] for name in _TRACE_NAMES}
 
+    def _final_arrays(self, trace_length: int) -> dict[str, np.ndarray]:
+        """The arrays a complete run's checksums cover: the final tree and the committed trace."""
+        out = {f"tree/{name}": self.group[f"tree/{name}"][...] for name in ("parent", "position", "radius", "kind")}
+        out.update({f"trace/{name}": self.group[f"trace/{name}"][:trace_length] for name in _TRACE_NAMES})
+        return out
+
+    def verify(self) -> None:
+        """Raise :class:`StoreError` saying what is wrong unless the store's results read back intact."""
+        attrs = self.attrs
+        n = int(attrs.get("trace_length", 0))
+        try:
+            if attrs.get("status") != STATUS_COMPLETE:
+                for name in _TRACE_NAMES:
+                    self.group[f"trace/{name}"][:n]
+                return
+            arrays = self._final_arrays(n)
+        except Exception as exc:  # a missing or truncated chunk or array fails to decode
+            raise StoreError(f"its {'final tree or ' if attrs.get('status') == STATUS_COMPLETE else ''}trace "
+                             f"cannot be read ({type(exc).__name__}: {exc})") from exc
+        if arrays["trace/step"].shape != (n,):
+            raise StoreError(f"its trace holds {arrays['trace/step'].shape[0]} records, {n} committed")
+        for key, crc in (attrs.get("checksums") or {}).items():
+            if key not in arrays or _crc(arrays[key]) != crc:
+                raise StoreError(f"array {key!r} fails its CRC-32 check")
+
     # -- checkpoints ------------------------------------------------------------------------
 
     def _checkpoint_names(self) -> list[str]:
@@ -447,10 +511,13 @@ class RunStore:
             arr = group.create_array(name, shape=data.shape, dtype=dtype, chunks=data.shape, dimension_names=dims,
                                      overwrite=True, attributes={"long_name": long_name, "units": units})
             arr[...] = data
+        # CRC-32 of what the run produced (tree and committed trace), read back as stored, in the
+        # same attribute write that makes the run complete: verify() checks them.
+        checksums = {key: _crc(data) for key, data in self._final_arrays(int(trace_length)).items()}
         self._set_attrs(status=STATUS_COMPLETE, checkpoint=None, steps_done=int(steps_done),
                         trace_length=int(trace_length), wall_seconds=float(wall_seconds), physics=dict(physics),
                         cost=dict(cost), cost_recomputed=dict(cost_recomputed), anneal=dict(anneal or {}),
-                        statistics=dict(statistics or {}))
+                        statistics=dict(statistics or {}), checksums=checksums)
         self.tidy()
 
     def tidy(self) -> None:

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .config import ConfigError, RunConfig, to_run_config, validate
+from .config import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
 from .store import run_path
 
 __all__ = ["Job", "expand", "run_id", "cell_id", "job_config"]
@@ -111,17 +111,16 @@ def expand(cfg: Any) -> list[Job]:
     out-of-range axis, duplicate grid points, or a job config that fails
     :func:`~vasc_pipeline.config.validate`.
     """
-    cfg = to_run_config(cfg)
+    cfg = validate(to_run_config(cfg))  # the base config as given (job_config resolves output_dir)
     sw = cfg.sweep
     ns = _axis("sweep.n_terminals", sw and sw.n_terminals, cfg.n_terminals, int, lambda v: v >= 2,
                "an integer >= 2 (terminal nodes)")
     mbs = _axis("sweep.m_b", sw and sw.m_b, cfg.physics.m_b, float, lambda v: v > 0 and math.isfinite(v),
                 "a finite number > 0 (W m^-3)")
-    seeds = _axis("sweep.seeds", sw and sw.seeds, cfg.seed, int, lambda v: 0 <= v < 2**63,
-                  "an integer in [0, 2^63)")
+    seeds = _axis("sweep.seeds", sw and sw.seeds, cfg.seed, int, lambda v: seed_ok(int(v)), SEED_ACCEPTED)
     has_steps = sw is not None and sw.steps is not None
-    steps_axis = _axis("sweep.steps", sw.steps, None, int, lambda v: v >= 1,
-                       "an integer >= 1 (proposed moves per run)") if has_steps else [None]
+    steps_axis = _axis("sweep.steps", sw.steps, None, int, lambda v: 1 <= v <= MAX_STEPS,
+                       f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)") if has_steps else [None]
     tissue = cfg.tissue.name
     jobs = []
     for n, m_b, steps, seed in itertools.product(ns, mbs, steps_axis, seeds):

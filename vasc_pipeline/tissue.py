@@ -15,6 +15,7 @@ boundary and bifurcations and inlets have room outside the tissue.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,31 @@ __all__ = ["Tissue", "TissueError", "build_tissue", "voxelize", "default_voxel_s
 # Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
 # ~270 voxels per supply sphere at every N (SPEC section 3).
 VOXELS_PER_SUPPLY_RADIUS = 4.0
+# Peak bytes per voxel while a grid is built: three float64 coordinate grids, the boolean and
+# uint8 masks, the distance transform (float64 distances and int32 feature indices per axis)
+# and its float32 copy. An estimate that refuses a grid before it is allocated.
+BUILD_BYTES_PER_VOXEL = 3 * 8 + 2 + 8 + 3 * 4 + 4
+
+
+def _physical_memory() -> int:
+    """Bytes of memory of this machine (the ceiling for one tissue grid)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: no ceiling known
+        return 2**62
+
+
+def check_grid_memory(counts, voxel_size: float) -> None:
+    """Refuse (TissueError) a grid whose construction would not fit in this machine's memory."""
+    n = math.prod(int(c) for c in counts)
+    need = n * BUILD_BYTES_PER_VOXEL
+    have = _physical_memory()
+    if need > have:
+        shape = " x ".join(str(int(c)) for c in counts)
+        raise TissueError(
+            f"tissue.voxel_size={voxel_size:.4g} m gives a voxel grid of {shape} = {n:.3g} voxels, which needs about "
+            f"{need / 2**30:.3g} GiB to build, more than the {have / 2**30:.3g} GiB of memory here; set a larger "
+            "tissue.voxel_size (unset, it is R_supply / 4, so it shrinks as n_terminals grows: lower n_terminals)")
 
 
 class TissueError(ValueError):
@@ -182,6 +208,7 @@ def voxelize(inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     if ndim == 2:
         counts[2] = 1
         origin[2] = lo[2]
+    check_grid_memory(counts, voxel_size)
     axes = [origin[a] + voxel_size * np.arange(counts[a]) for a in range(3)]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
     return inside(x, y, z).astype(np.uint8), origin
@@ -246,6 +273,13 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
     attrs: dict = {}
     try:
         if p.suffix == ".npy":
+            with open(p, "rb") as fh:
+                head = fh.read(64)
+            if not head.startswith(b"\x93NUMPY"):  # np.load would call anything else "pickled data"
+                kind = "a text file" if head and all(32 <= b < 127 or b in b"\t\r\n" for b in head) else \
+                    "a binary file of another format"
+                raise TissueError(f"tissue.{field}: {str(p)!r} is {kind}, not a NumPy .npy array (it starts with "
+                                  f"{head[:24]!r}); save the mask with numpy.save, or give a Zarr array")
             data = np.load(p, allow_pickle=False)
         else:
             import zarr
@@ -263,6 +297,10 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
         raise TissueError(f"tissue.{field}: cannot read mask {str(p)!r}: {exc}") from exc
     if data.ndim not in (2, 3):
         raise TissueError(f"tissue.{field}: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
+    if np.issubdtype(data.dtype, np.inexact) and not np.all(np.isfinite(data)):
+        bad = int(np.count_nonzero(~np.isfinite(data)))
+        raise TissueError(f"tissue.{field}: the mask {str(p)!r} holds {bad} NaN or infinite voxels; every voxel must "
+                          "be a number (nonzero = tissue, 0 = outside)")
     return data, attrs
 
 
