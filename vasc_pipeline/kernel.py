@@ -23,7 +23,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ._jit import jit, jit_inline, jit_norc, jit_norc_inline
+from ._jit import jit, jit_norc, jit_norc_inline
 from .rng import next_below, next_double
 
 Model = namedtuple("Model", [
