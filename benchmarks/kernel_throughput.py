@@ -8,7 +8,8 @@ that has been annealed to that point, and prints one JSON line per N:
     n_terminals, moves_per_second (over the schedule phases, weighted by steps), per-phase rates,
     the paper's step budget for N and its extrapolated wall time on one core.
 
-Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--moves 400000]
+Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--moves 400000] [--anneal fast]
+       python benchmarks/kernel_throughput.py --quick    # N = 20, a few thousand moves (seconds)
 """
 
 from __future__ import annotations
@@ -48,13 +49,16 @@ def measure(n_terminals: int, moves: int, warmup: int, anneal: str = "paper") ->
     }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[500, 1000, 2000, 6000])
     parser.add_argument("--moves", type=int, default=400_000)
     parser.add_argument("--warmup", type=int, default=2_000_000)
     parser.add_argument("--anneal", choices=["paper", "fast"], default="paper", help="schedule (default: paper)")
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true", help="N = 20, 2000 moves per phase: checks the script runs")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.sizes, args.moves, args.warmup = [20], 2000, 2000
     for n in args.sizes:
         print(json.dumps(measure(n, args.moves, args.warmup, args.anneal)), flush=True)
 

@@ -1,6 +1,7 @@
 """Overhead of the pipeline against calling the engine directly for the same jobs.
 
     python benchmarks/pipeline_overhead.py [--jobs 4] [--workers 2] [--steps 20000000]
+    python benchmarks/pipeline_overhead.py --quick    # 2 tiny jobs on 1 worker (seconds)
 
 Both sides run the same jobs (a small sphere sweep) with the same parallelism:
 
@@ -32,7 +33,7 @@ def _direct(job_config: dict, seed: int) -> float:
     return time.perf_counter() - start
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", type=int, default=4, help="runs in the sweep (seeds)")
     ap.add_argument("--workers", type=int, default=2)
@@ -40,7 +41,10 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20_000_000,
                     help="proposed moves per run (default: jobs of ~30 s, so fixed start-up costs do not dominate)")
     ap.add_argument("--checkpoint-seconds", type=float, default=30.0)
-    args = ap.parse_args()
+    ap.add_argument("--quick", action="store_true", help="2 jobs of 20000 moves, N = 12, 1 worker: checks the script runs")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.jobs, args.workers, args.n_terminals, args.steps = 2, 1, 12, 20_000
 
     with tempfile.TemporaryDirectory() as out:
         cfg = config.compose([

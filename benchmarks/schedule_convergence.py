@@ -15,6 +15,7 @@ cost C_s (voxel units) and the rest, C_v + C_w + A_o/A_wv C_o [W].
     python benchmarks/schedule_convergence.py --case plane2d --out results/bench_plane2d
     python benchmarks/schedule_convergence.py --case heart --out results/bench_heart
     python benchmarks/schedule_convergence.py --case heart --out results/bench_heart --schedules fast
+    python benchmarks/schedule_convergence.py --quick    # plane2d, 2 seeds, 2000 and 5000 moves (seconds)
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ def figure(table: list[dict], case: str, path: Path) -> None:
     plt.close(fig)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--case", choices=sorted(CASES), default="plane2d")
     parser.add_argument("--seeds", type=int, help="seeds per point (default: 8 for plane2d, 4 for heart)")
@@ -103,8 +104,12 @@ def main() -> None:
                         help="run only these schedules (the table holds every run in --out)")
     parser.add_argument("--workers", type=int, default=os.cpu_count())
     parser.add_argument("--out", type=Path, help="directory for runs.jsonl, table.csv, convergence.png")
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true",
+                        help="2 seeds at 2000 and 5000 moves per schedule (seconds): checks the script runs")
+    args = parser.parse_args(argv)
     case = CASES[args.case]
+    if args.quick:
+        case = {**case, "seeds": 2, "steps": {schedule: [2_000, 5_000] for schedule in SCHEDULES}}
     seeds = range(args.seeds or case["seeds"])
     tasks = [(args.case, case["overrides"], schedule, steps, seed)
              for schedule, all_steps in case["steps"].items() if schedule in args.schedules

@@ -175,3 +175,21 @@ def test_translation_keeps_terminals_in_tissue_and_bifurcations_in_the_grid(smal
     assert kernel.translate_node(problem.model, state, bifurcation, outside_tissue, 1e300) == kernel.ACCEPTED
     assert kernel.translate_node(problem.model, state, bifurcation, hi + 1e-3, 1e300) == kernel.ILLEGAL
     assert_running_equals_full(problem, state)
+
+
+def test_supply_map_is_int16_and_int32_checkpoints_resume_bit_identically():
+    # The count map is int16 while no count can overflow it (a count is at most N); a
+    # checkpoint written with the former int32 map resumes to the same state.
+    assert engine.supply_dtype(32767) is np.int16 and engine.supply_dtype(32768) is np.int32
+    problem = make_problem("tissue=sphere", "n_terminals=40", *COLD, "anneal.steps=100000")
+    state = engine.initial_state(problem, seed=5)
+    assert state.supply.dtype == np.int16
+    engine.run_block(problem, state, 50_000)
+    arrays = engine.state_arrays(state)
+    old_style = engine.restore_state(problem, {**arrays, "supply": arrays["supply"].astype(np.int32)})
+    assert old_style.supply.dtype == np.int16
+    engine.run_block(problem, state, 50_000)
+    engine.run_block(problem, old_style, 50_000)
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(state, name), getattr(old_style, name), err_msg=name)
+    assert_running_equals_full(problem, state)

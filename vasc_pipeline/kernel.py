@@ -23,7 +23,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_norc, jit_norc_inline
 from .rng import next_below, next_double
 
 Model = namedtuple("Model", [
@@ -55,7 +55,7 @@ State = namedtuple("State", [
     "parent", "children", "position", "n_downstream",
     "seg_length",        # float64 (2N,) m
     "seg_exclusion",     # float64 (2N,) sum_v (D_v L_v)^6 of the segment's centre-line
-    "supply",            # int32 (nz, ny, nx) supply count per tissue voxel, -1 outside tissue
+    "supply",            # int16 (int32 for N > 32767; engine.supply_dtype) (nz, ny, nx) supply count per tissue voxel, -1 outside tissue
     "costs", "compensation",  # float64 (5,) running sums and their Neumaier compensation
     "rng",               # uint64 (4,)
     "counters",          # int64 (8,) see COUNTER_*
@@ -76,7 +76,7 @@ ILLEGAL, REJECTED, ACCEPTED = -1, 0, 1  # outcomes of a proposal
 T_VOLUME, T_POWER, T_EXCLUSION, T_RESISTANCE, T_FLOW = range(5)
 
 
-@jit_inline
+@jit_norc_inline
 def _add(costs, compensation, k, x):
     """Neumaier-compensated running sum: long runs drift by O(eps), not O(steps * eps)."""
     s = costs[k]
@@ -88,7 +88,7 @@ def _add(costs, compensation, k, x):
     costs[k] = t
 
 
-@jit
+@jit_norc
 def temperature(model, state, step):
     """Exponential schedule ``state.schedule`` = (T_start, T_end) from pack_steps to total_steps; T_end afterwards."""
     frac = min(max(step - model.pack_steps, 0.0) / (model.total_steps - model.pack_steps), 1.0)
@@ -96,7 +96,7 @@ def temperature(model, state, step):
     return t_start * math.exp(math.log(state.schedule[1] / t_start) * frac)
 
 
-@jit_inline
+@jit_norc_inline
 def supply_weight(model, state, temp):
     """Weight of ΔC_s in the Metropolis test at ``temp``.
 
@@ -113,7 +113,7 @@ def supply_weight(model, state, temp):
     return min(model.w_supply, temp / t_s)
 
 
-@jit_inline
+@jit_norc_inline
 def _distance3(a, b):
     dx = a[0] - b[0]
     dy = a[1] - b[1]
@@ -121,7 +121,7 @@ def _distance3(a, b):
     return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@jit
+@jit_norc
 def segment_exclusion(model, p0, p1):
     """sum_v (D_v L_v)^6 over voxels crossed by p0 -> p1 (exact Amanatides-Woo traversal).
 
@@ -201,7 +201,7 @@ def segment_exclusion(model, p0, p1):
     return acc
 
 
-@jit_inline
+@jit_norc_inline
 def _inside(i, u, d2, e2, rho2):
     """The coverage test of voxel i, written exactly as the NumPy reference writes it."""
     dx = i - u
@@ -211,7 +211,7 @@ def _inside(i, u, d2, e2, rho2):
 _ROUNDING = 1e-9  # an interval end this close to a voxel centre is settled by the exact test
 
 
-@jit_inline
+@jit_norc_inline
 def _row_interval(u, d2, e2, rho2, n):
     """Voxels i of one grid row whose centre lies within a sphere, clipped to [0, n).
 
@@ -249,27 +249,34 @@ def _row_interval(u, d2, e2, rho2, n):
     return max(lo, 0), min(hi, n - 1)
 
 
-@jit_inline
+@jit_norc_inline
 def _voxel_coords(model, x, y, z):
     h = model.voxel_size
     return (x - model.origin[0]) / h, (y - model.origin[1]) / h, (z - model.origin[2]) / h
 
 
-@jit_inline
+@jit_norc_inline
 def _range_change(supply, k, j, lo, hi, sign, write):
-    """C_s change when voxels lo..hi of row (k, j) gain ``sign``; branch-free so LLVM vectorises it.
+    """C_s change when voxels lo..hi of row (k, j) gain ``sign``.
 
     s(0) = 10, s(b) = (b - 1)^2: s(b + 1) - s(b) = 2b - 1 - 9 [b = 0] and
     s(b - 1) - s(b) = 3 - 2b + 9 [b = 1]; non-tissue voxels hold -1 and contribute 0.
     """
+    # The loops exit early on a count below -1 (none is): LLVM does not vectorise loops
+    # with two exits, and these are a few voxels long, where a vectorised loop's set-up
+    # and remainder cost more than they save (measured: -25 % time per supply delta).
     delta = 0
     if sign > 0:
         for i in range(lo, hi + 1):
             b = np.int64(supply[k, j, i])
+            if b < -1:
+                break
             delta += (b >= 0) * ((2 * b - 1) - 9 * (b == 0))
     else:
         for i in range(lo, hi + 1):
             b = np.int64(supply[k, j, i])
+            if b < -1:
+                break
             delta += (b >= 0) * ((3 - 2 * b) + 9 * (b == 1))
     if write:
         for i in range(lo, hi + 1):
@@ -278,7 +285,7 @@ def _range_change(supply, k, j, lo, hi, sign, write):
     return delta
 
 
-@jit_inline
+@jit_norc_inline
 def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
     """C_s change when voxels lo..hi of row (k, j), except other_lo..other_hi, gain ``sign``."""
     if other_lo > other_hi or other_hi < lo or other_lo > hi:  # nothing to exclude
@@ -287,7 +294,7 @@ def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
             + _range_change(supply, k, j, other_hi + 1, hi, sign, write))
 
 
-@jit
+@jit_norc
 def _sphere_change(model, supply, old, new, write):
     """Change of C_s when a supply sphere moves from ``old`` to ``new`` (either may be NaN: absent).
 
@@ -342,7 +349,7 @@ def _sphere_change(model, supply, old, new, write):
 _NO_SPHERE = np.array([np.nan, np.nan, np.nan])
 
 
-@jit
+@jit_norc
 def supply_sphere(model, supply, p, sign):
     """Add (sign = +1) or remove (-1) one supply sphere centred at p; return the change of C_s."""
     if sign > 0:
@@ -350,19 +357,19 @@ def supply_sphere(model, supply, p, sign):
     return _sphere_change(model, supply, p, _NO_SPHERE, True)
 
 
-@jit
+@jit_norc_inline
 def supply_move_delta(model, supply, old, new):
     """Change of C_s if a sphere moved from ``old`` to ``new``; reads only voxels that change."""
     return _sphere_change(model, supply, old, new, False)
 
 
-@jit
+@jit_norc_inline
 def supply_move(model, supply, old, new):
     """Move a sphere from ``old`` to ``new`` in the count map."""
     _sphere_change(model, supply, old, new, True)
 
 
-@jit
+@jit_norc
 def pressure_cost(model, state):
     """C_p from scratch: Poiseuille drops down every inlet's tree (O(N), depth-first)."""
     tables = model.tables
@@ -398,7 +405,7 @@ def pressure_cost(model, state):
 # list order decides which partner a draw picks, so it is checkpointed, not rebuilt).
 
 
-@jit_inline
+@jit_norc_inline
 def _cell_coords(model, p):
     """Cell (cx, cy, cz) of a point, clipped to the cell grid."""
     h = model.cell_size
@@ -408,13 +415,13 @@ def _cell_coords(model, p):
     return cx, cy, cz
 
 
-@jit_inline
+@jit_norc_inline
 def _cell_of_point(model, p):
     cx, cy, cz = _cell_coords(model, p)
     return (cz * model.cell_shape[1] + cy) * model.cell_shape[0] + cx
 
 
-@jit_inline
+@jit_norc_inline
 def _cell_insert(state, i, c):
     head = state.cell_head[c]
     state.cell_next[i] = head
@@ -425,7 +432,7 @@ def _cell_insert(state, i, c):
     state.cell_of[i] = c
 
 
-@jit_inline
+@jit_norc_inline
 def _cell_remove(state, i):
     c = state.cell_of[i]
     nxt = state.cell_next[i]
@@ -438,7 +445,7 @@ def _cell_remove(state, i):
         state.cell_prev[nxt] = prv
 
 
-@jit_inline
+@jit_norc_inline
 def _cell_update(model, state, i, p):
     """Move node i's entry to the cell of its new position p."""
     c = _cell_of_point(model, p)
@@ -447,7 +454,7 @@ def _cell_update(model, state, i, p):
         _cell_insert(state, i, c)
 
 
-@jit
+@jit_norc
 def build_cells(model, state):
     """Fill the cell lists from the node positions (inlets are never swap partners)."""
     state.cell_head[:] = -1
@@ -458,7 +465,7 @@ def build_cells(model, state):
         _cell_insert(state, i, _cell_of_point(model, state.position[i]))
 
 
-@jit
+@jit_norc
 def neighbour_partner(model, state, a, rng):
     """A node drawn uniformly from those in a's cell and the cells around it (a excluded); -1 if none.
 
@@ -488,7 +495,7 @@ def neighbour_partner(model, state, a, rng):
     return -1
 
 
-@jit
+@jit  # once per run; np.count_nonzero needs the reference-counted runtime
 def initialise(model, state):
     """Fill the per-segment caches, the supply map and the running sums from the tree."""
     tables = model.tables
@@ -524,14 +531,14 @@ def initialise(model, state):
     build_cells(model, state)
 
 
-@jit
+@jit_norc
 def _accept(d_cost, temp, rng):
     if d_cost <= 0.0:
         return True
     return next_double(rng) < math.exp(-d_cost / temp)
 
 
-@jit_inline
+@jit_norc_inline
 def _early_reject(lower_bound, temp, rng):
     """Metropolis on a lower bound of ΔC, before the costly terms are evaluated.
 
@@ -546,7 +553,7 @@ def _early_reject(lower_bound, temp, rng):
     return u >= math.exp(-lower_bound / temp), u
 
 
-@jit_inline
+@jit_norc_inline
 def _accept_with(d_cost, temp, rng, u):
     """:func:`_accept`, reusing the uniform ``u`` when :func:`_early_reject` drew one."""
     if d_cost <= 0.0:
@@ -556,7 +563,7 @@ def _accept_with(d_cost, temp, rng, u):
     return u < math.exp(-d_cost / temp)
 
 
-@jit
+@jit_norc_inline
 def _translate(model, state, temp, new):
     """Propose moving a random non-inlet node by a uniform random displacement (``new``: scratch (3,))."""
     rng = state.rng
@@ -582,13 +589,13 @@ def _translate(model, state, temp, new):
         new[a] = pos[i, a] + (2.0 * next_double(rng) - 1.0) * half
     if model.planar:
         new[2] = pos[i, 2]
-    outcome = translate_node(model, state, i, new, temp)
+    outcome = _translate_node(model, state, i, new, temp)
     if model.adapt_steps and not full_width:
         _adapt_step(model, state, cls, outcome == ACCEPTED)
     return outcome
 
 
-@jit_inline
+@jit_norc_inline
 def _adapt_step(model, state, cls, accepted):
     """Scale a class's translation half-width after every window of its proposals.
 
@@ -609,12 +616,18 @@ def _adapt_step(model, state, cls, accepted):
         c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] = 0
 
 
-@jit
+@jit_norc
 def translate_node(model, state, i, new, temp):
     """Propose moving node i to ``new``; Metropolis at ``temp``. Returns ILLEGAL, REJECTED or ACCEPTED.
 
     A terminal must land in tissue, a bifurcation inside the grid's box.
     """
+    return _translate_node(model, state, i, new, temp)
+
+
+@jit_norc_inline
+def _translate_node(model, state, i, new, temp):
+    """:func:`translate_node`, inlined into the move loop (:func:`_anneal_steps`)."""
     tables = model.tables
     rng = state.rng
     pos = state.position
@@ -729,7 +742,7 @@ def translate_node(model, state, i, new, temp):
     return ACCEPTED
 
 
-@jit
+@jit_norc
 def _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure):
     """Add an accepted move's deltas to the running sums."""
     costs = state.costs
@@ -744,7 +757,7 @@ def _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure):
         comp[PRESSURE] = 0.0
 
 
-@jit
+@jit_norc
 def _path_delta(model, state, start, stop, dn):
     """Volume, power and exclusion change when n changes by dn on the path start .. stop (exclusive)."""
     tables = model.tables
@@ -765,7 +778,7 @@ def _path_delta(model, state, start, stop, dn):
     return d_vol, d_pow, d_exc
 
 
-@jit
+@jit_norc
 def _exchange_parents(state, a, b, lca):
     """Hang a where b hung and b where a hung; fix the downstream counts up to the LCA.
 
@@ -791,7 +804,7 @@ def _exchange_parents(state, a, b, lca):
         x = state.parent[x]
 
 
-@jit
+@jit_norc_inline
 def _swap(model, state, temp):
     """Propose exchanging the parents of two distinct random non-inlet nodes."""
     rng = state.rng
@@ -809,16 +822,28 @@ def _swap(model, state, temp):
         b = k_in + next_below(rng, n_movable - 1)
         if b >= a:
             b += 1
-    return swap_nodes(model, state, a, b, temp)
+    return _swap_nodes(model, state, a, b, temp)
 
 
-@jit
+@jit_norc
+def swap_random(model, state, temp):
+    """Propose a swap of a random pair (:func:`_swap`), for callers outside the move loop."""
+    return _swap(model, state, temp)
+
+
+@jit_norc
 def swap_nodes(model, state, a, b, temp):
     """Propose hanging a where b hangs and b where a hangs (SPEC section 2).
 
     Siblings, and pairs where one is an ancestor of the other, are ILLEGAL. Returns
     ILLEGAL, REJECTED or ACCEPTED.
     """
+    return _swap_nodes(model, state, a, b, temp)
+
+
+@jit_norc_inline
+def _swap_nodes(model, state, a, b, temp):
+    """:func:`swap_nodes`, inlined into the move loop (:func:`_anneal_steps`)."""
     tables = model.tables
     rng = state.rng
     pos = state.position
@@ -908,7 +933,16 @@ def swap_nodes(model, state, a, b, temp):
 @jit
 def anneal_block(model, state, n_steps):
     """Propose ``n_steps`` moves from ``state`` (in place), continuing its step count."""
-    new = np.empty(3)
+    _anneal_steps(model, state, n_steps, np.empty(3))
+
+
+@jit_norc
+def _anneal_steps(model, state, n_steps, new):
+    """The move loop of :func:`anneal_block` (``new``: scratch (3,)).
+
+    Compiled without reference counting (see ``_jit.jit_norc``), as is every function
+    it calls, and the moves are inlined here.
+    """
     for _ in range(n_steps):
         step = state.counters[COUNTER_STEP]
         temp = temperature(model, state, step)
@@ -919,15 +953,17 @@ def anneal_block(model, state, n_steps):
         state.counters[COUNTER_STEP] = step + 1
 
 
-@jit
+@jit_norc
 def scaled_total_without_supply(model, state):
     """The annealed total C of the running sums less its supply term [W].
 
     The supply term (weight 1e26 by default) would swamp every other term's rounding in
     a difference of totals; moves that leave the supply alone are compared on this.
     """
-    v = state.costs + state.compensation
-    return (v[VOLUME] + v[POWER]) + model.w_exclusion * v[EXCLUSION] + model.w_pressure * v[PRESSURE]
+    c = state.costs
+    e = state.compensation
+    return ((c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER])) + model.w_exclusion * (c[EXCLUSION] + e[EXCLUSION]) \
+        + model.w_pressure * (c[PRESSURE] + e[PRESSURE])
 
 
 @jit
@@ -939,14 +975,18 @@ def sample_uphill(model, state, n_samples, out):
     on a copy of a state: every legal proposal is accepted. Returns how many ΔC > 0
     were stored (at most ``out.size``).
     """
-    new = np.empty(3)
+    return _sample_uphill(model, state, n_samples, out, np.empty(3))
+
+
+@jit_norc
+def _sample_uphill(model, state, n_samples, out, new):
     first_bif = model.n_inlets + model.n_terminals
     n_bif = state.parent.size - first_bif
     stored = 0
     for _ in range(n_samples):
         before = scaled_total_without_supply(model, state)
         if n_bif == 0 or next_double(state.rng) < 0.5:
-            _swap(model, state, np.inf)
+            swap_random(model, state, np.inf)
         else:
             i = first_bif + next_below(state.rng, n_bif)
             half = state.step_size[1]

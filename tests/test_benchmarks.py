@@ -1,0 +1,34 @@
+"""Every script in benchmarks/ runs to the end in its --quick mode, so none can rot unnoticed.
+
+Correctness of the scripts' plumbing only (tiny sizes, seconds each): no timing is asserted.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("*.py"))
+
+
+def test_benchmarks_are_found():
+    assert {"kernel_profile.py", "kernel_throughput.py"} <= {p.name for p in BENCHMARKS}
+
+
+@pytest.mark.parametrize("script", BENCHMARKS, ids=[p.stem for p in BENCHMARKS])
+def test_benchmark_runs_in_quick_mode(script, tmp_path):
+    done = subprocess.run([sys.executable, str(script), "--quick"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = done.stdout.splitlines()
+    assert lines, "a benchmark prints its figures"
+    records = [json.loads(line) for line in lines if line.startswith("{")]
+    if script.stem in ("kernel_profile", "kernel_throughput"):
+        assert records and all(r["n_terminals"] == 20 for r in records)
+    if script.stem == "kernel_profile":
+        assert {r["phase"] for r in records} == {"start", "middle", "end"}
+        assert all(r["ns_per_move"]["all"] > 0 for r in records)
+    if script.stem == "kernel_throughput":
+        assert all(r["moves_per_second"] > 0 for r in records)
