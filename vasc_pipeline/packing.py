@@ -27,21 +27,21 @@ import math
 import numpy as np
 
 from . import kernel
-from ._jit import jit
+from ._jit import jit, jit_norc, jit_norc_inline
 from .costs import supply_cost, supply_counts
 from .rng import next_below, next_double
 
 __all__ = ["pack_block", "end_packing", "pack_block_reference", "packing_temperature"]
 
 
-@jit
+@jit_norc
 def packing_temperature(model, step):
     """Packing temperature [C_s units] at ``step`` < ``model.pack_steps``."""
     frac = step / model.pack_steps
     return model.pack_T_start * math.exp(math.log(model.pack_T_end / model.pack_T_start) * frac)
 
 
-@jit
+@jit_norc_inline
 def _in_tissue(model, p):
     h = model.voxel_size
     nz, ny, nx = model.mask.shape
@@ -51,7 +51,7 @@ def _in_tissue(model, p):
     return 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and model.mask[k, j, i] != 0
 
 
-@jit
+@jit_norc_inline
 def _pack_move(model, state, temp, new):
     """Propose moving one random terminal; accept on ΔC_s at ``temp``. Returns the outcome."""
     rng = state.rng
@@ -111,21 +111,27 @@ def end_packing(model, state):
     kernel.initialise(model, state)
 
 
-@jit
-def pack_block(model, state, n_steps):
-    """Run up to ``n_steps`` packing proposals (not past ``model.pack_steps``); return how many.
-
-    The proposal that reaches ``pack_steps`` ends the phase (:func:`end_packing`).
-    """
-    new = np.empty(3)
+@jit_norc
+def _pack_steps(model, state, n_steps, new):
     done = 0
     while done < n_steps and state.counters[kernel.COUNTER_STEP] < model.pack_steps:
         step = state.counters[kernel.COUNTER_STEP]
         _pack_move(model, state, packing_temperature(model, step), new)
         state.counters[kernel.COUNTER_STEP] = step + 1
         done += 1
-        if step + 1 == model.pack_steps:
-            end_packing(model, state)
+    return done
+
+
+@jit
+def pack_block(model, state, n_steps):
+    """Run up to ``n_steps`` packing proposals (not past ``model.pack_steps``); return how many.
+
+    The block whose last proposal reaches ``pack_steps`` ends the phase (:func:`end_packing`).
+    The loop runs without reference counting (``_jit.jit_norc``); this wrapper allocates.
+    """
+    done = _pack_steps(model, state, n_steps, np.empty(3))
+    if done > 0 and state.counters[kernel.COUNTER_STEP] == model.pack_steps:
+        end_packing(model, state)
     return done
 
 
