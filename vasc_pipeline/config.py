@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 __all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
-           "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
+           "MethodConfig", "METHODS", "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
            "compose", "CONFIG_DIR"]
 
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
@@ -23,6 +23,8 @@ _PACKAGE_DIR = Path(__file__).resolve().parent
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
 STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
+METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
+ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 
 
 class ConfigError(ValueError):
@@ -88,12 +90,24 @@ class AnnealConfig:
     polish: bool = False                 # optimise the final topology's bifurcation positions (geometry.polish)
     polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (geometry.descend_swaps)
     trace_every: int = 100_000           # steps between trace records
+    init: str = "random"                 # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.cco, method.* settings)
 
 
 @dataclass
 class TerminalsConfig:
     path: Optional[str] = None           # CSV of x, y, z (m)
     fixed: bool = False                  # fixed sites never move; the supply term is off
+
+
+@dataclass
+class MethodConfig:
+    """How the tree is grown: ``method=anneal`` (default) or ``method=cco`` (conf/method/)."""
+
+    name: str = "anneal"
+    candidates: int = 20                 # cco: nearest segments evaluated for each new terminal
+    max_tries: int = 10                  # cco: rejected sites before the distance criterion shrinks
+    shrink: float = 0.9                  # cco: factor of that shrink
+    order: str = "file"                  # cco with terminals.path: "file" order or a seeded "random" order
 
 
 @dataclass
@@ -111,6 +125,7 @@ class RunConfig:
     anneal: AnnealConfig = field(default_factory=AnnealConfig)
     terminals: TerminalsConfig = field(default_factory=TerminalsConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    method: MethodConfig = field(default_factory=MethodConfig)
     # The pipeline's groups (dataclasses at the end of this module): +sweep=NAME adds a
     # sweep, so it is optional; cluster is always present (cluster=local by default).
     sweep: Optional[SweepConfig] = None
@@ -142,7 +157,12 @@ def _positive(name: str, value: float) -> None:
 
 
 def scheduled_steps(cfg: RunConfig) -> int:
-    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default."""
+    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default.
+
+    A CCO run (``method=cco``) counts terminals added instead: N.
+    """
+    if cfg.method.name == "cco":
+        return int(cfg.n_terminals)
     if cfg.anneal.steps is not None:
         return int(cfg.anneal.steps)
     return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** 2)))
@@ -208,9 +228,25 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)
     if cfg.stage not in STAGES:
         raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
+    _validate_method(cfg)
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return cfg
+
+
+def _validate_method(cfg: RunConfig) -> None:
+    m = cfg.method
+    if m.name not in METHODS:
+        raise ConfigError(f"method.name: unknown method {m.name!r}; accepted: {', '.join(METHODS)} (method=cco)")
+    if cfg.anneal.init not in ANNEAL_INITS:
+        raise ConfigError(f"anneal.init must be one of {', '.join(ANNEAL_INITS)}, got {cfg.anneal.init!r}")
+    for name in ("candidates", "max_tries"):
+        if not isinstance(getattr(m, name), int) or getattr(m, name) < 1:
+            raise ConfigError(f"method.{name} must be an integer >= 1, got {getattr(m, name)}")
+    if not 0.0 < m.shrink < 1.0:
+        raise ConfigError(f"method.shrink must lie in (0, 1), got {m.shrink}")
+    if m.order not in ("file", "random"):
+        raise ConfigError(f"method.order must be 'file' or 'random', got {m.order!r}")
 
 
 def register_schema() -> None:
