@@ -117,7 +117,7 @@ def fermat_point(p, q, r, wp, wq, wr, out):
     A vertex is the optimum when the pull of the other two (weighted unit vectors) does
     not exceed its own weight (coinciding vertices pool their weights); otherwise the
     optimum is interior and Weiszfeld's iteration, started at the weighted centroid,
-    converges to it (to 1e-13 of the triangle's size, at most 500 iterations).
+    converges to it; Newton steps (downhill only) then polish it to rounding.
     """
     pts = np.empty((3, 3))
     w = np.empty(3)
@@ -167,9 +167,57 @@ def fermat_point(p, q, r, wp, wq, wr, out):
         x0, x1, x2 = n0 / s, n1 / s, n2 / s
         step = _norm3(x0 - out[0], x1 - out[1], x2 - out[2])
         out[0], out[1], out[2] = x0, x1, x2
-        if step <= 1e-13 * scale:
+        if step <= 1e-10 * scale:
             break
-    return _cost3(pts, w, out)
+    # Newton on the smooth interior problem finishes what Weiszfeld's linear rate leaves
+    # (slow near a vertex): H = sum w_i / d_i (I - u_i u_i^T), steps only downhill.
+    cost = _cost3(pts, w, out)
+    hess = np.empty((3, 3))
+    grad = np.empty(3)
+    trial = np.empty(3)
+    for _ in range(30):
+        hess[:, :] = 0.0
+        grad[:] = 0.0
+        for u in range(3):
+            d0 = out[0] - pts[u, 0]
+            d1 = out[1] - pts[u, 1]
+            d2 = out[2] - pts[u, 2]
+            d = max(_norm3(d0, d1, d2), tiny)
+            u0, u1, u2 = d0 / d, d1 / d, d2 / d
+            grad[0] += w[u] * u0
+            grad[1] += w[u] * u1
+            grad[2] += w[u] * u2
+            c = w[u] / d
+            hess[0, 0] += c * (1.0 - u0 * u0)
+            hess[1, 1] += c * (1.0 - u1 * u1)
+            hess[2, 2] += c * (1.0 - u2 * u2)
+            hess[0, 1] -= c * u0 * u1
+            hess[0, 2] -= c * u0 * u2
+            hess[1, 2] -= c * u1 * u2
+        hess[1, 0], hess[2, 0], hess[2, 1] = hess[0, 1], hess[0, 2], hess[1, 2]
+        if _norm3(grad[0], grad[1], grad[2]) <= 1e-13 * total:
+            break
+        det = (hess[0, 0] * (hess[1, 1] * hess[2, 2] - hess[1, 2] * hess[2, 1])
+               - hess[0, 1] * (hess[1, 0] * hess[2, 2] - hess[1, 2] * hess[2, 0])
+               + hess[0, 2] * (hess[1, 0] * hess[2, 1] - hess[1, 1] * hess[2, 0]))
+        if not abs(det) > 0.0:
+            break
+        step = np.linalg.solve(hess, grad)
+        t = 1.0
+        improved = False
+        for _ in range(20):
+            for c in range(3):
+                trial[c] = out[c] - t * step[c]
+            new = _cost3(pts, w, trial)
+            if new <= cost:
+                improved = new < cost
+                out[0], out[1], out[2] = trial[0], trial[1], trial[2]
+                cost = new
+                break
+            t *= 0.5
+        if not improved or t * _norm3(step[0], step[1], step[2]) <= 1e-15 * scale:
+            break
+    return cost
 
 
 @jit_inline
