@@ -193,9 +193,11 @@ def test_given_sites_in_file_order_and_in_random_order(tmp_path):
 # The anneal's optimum is never above CCO
 
 
-@pytest.mark.parametrize("n", [4, 5, 6])
-def test_exhaustive_optimum_and_fixed_terminal_anneal_never_above_cco(n, tmp_path):
-    for trial in range(3):
+@pytest.mark.parametrize("n, trials", [(4, 3), (5, 2), pytest.param(6, 2, marks=pytest.mark.slow)])  # 945 topologies
+def test_exhaustive_optimum_and_fixed_terminal_anneal_never_above_cco(n, trials, tmp_path):
+    """The exact optimum over every topology (geometry.best_topology) and the anneal (with its
+    single-swap descent) on the same 4-6 fixed terminals are never above CCO's C_v + C_w."""
+    for trial in range(trials):
         sites = random_terminal_sites(engine.build_problem(config.compose(["tissue=plane2d"])).tissue, n,
                                       seed_state(100 * n + trial))
         csv = tmp_path / f"s{trial}.csv"
@@ -290,10 +292,10 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     assert red.cell_dims[0] == "method"
     costs = xr.open_zarr(out / "summary.zarr", group="costs")
     assert list(costs.method.values) == ["anneal", "cco"]
-    assert costs.cost_total.sel(method="cco").notnull().all()
-    assert costs.cost_total.sel(method="anneal").notnull().all()
+    assert costs.cost_total.sel({"method": "cco"}).notnull().all()
+    assert costs.cost_total.sel({"method": "anneal"}).notnull().all()
     morph = xr.open_zarr(out / "summary.zarr", group="morphometry")
-    assert "-cco-" in str(morph.best_run_id.sel(method="cco", n_terminals=16).values)
+    assert "-cco-" in str(morph.best_run_id.sel({"method": "cco", "n_terminals": 16}).values)
     assert red.figures and not red.errors
     assert set(red.comparison["method"]) == {"anneal", "cco"}
 
