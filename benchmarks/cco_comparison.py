@@ -268,6 +268,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--case", choices=sorted(CASES), default="heart")
     parser.add_argument("--n", type=int, nargs="+", default=[100, 500])
     parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--anneal-steps", type=int, help="anneal.steps of the anneal runs (default: the schedule's "
+                        "budget, 1e8 (N/1000)^2); use a separate --out")
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument("--out", type=Path, help="directory for sites, runs.jsonl and tables.json")
     parser.add_argument("--speed", action="store_true", help="only time CCO's growth (N = 1000 and 6000)")
@@ -277,6 +279,8 @@ def main(argv: list[str] | None = None) -> dict:
     if args.quick:
         args.n, args.seeds = [12, 20], 2
         extra += ["anneal.steps=20000", "anneal.polish_swaps_max_terminals=0"]
+    elif args.anneal_steps:
+        extra.append(f"anneal.steps={args.anneal_steps}")
     if args.speed:
         return {"speed": speed([200, 600] if args.quick else [1000, 6000], 1 if args.quick else 3, extra)}
     out = args.out or Path("results/bench_cco")
