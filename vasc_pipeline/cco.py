@@ -60,7 +60,7 @@ from .costs import COST_TERMS, full_costs, total_cost
 from .kernel import _add
 from .physics import cost_tables
 from .rng import next_below, next_double, seed_state
-from .tree import Tree, children_from_parent, random_terminal_sites
+from .tree import Tree, random_terminal_sites
 
 __all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", "TRACE_NAMES"]
 
