@@ -224,7 +224,9 @@ def test_anneal_ids_and_stored_configs_are_unchanged_and_cco_ids_name_the_method
     assert "method" not in a.config and "init" not in a.config["anneal"]  # config hash as before CCO
     (c,) = sweep.expand(config.compose(["method=cco", f"output_dir={tmp_path}"]))
     assert c.run_id == "heart-N200-mb641.3-cco-s0" and c.coords["method"] == "cco"
-    assert c.config["method"]["name"] == "cco"
+    assert c.config["method"]["name"] == "cco" and "anneal" not in c.config
+    (c2,) = sweep.expand(config.compose(["method=cco", "anneal=paper", f"output_dir={tmp_path}"]))
+    assert store.config_hash(c2.config) == store.config_hash(c.config)
     (w,) = sweep.expand(config.compose(["anneal.init=cco", f"output_dir={tmp_path}"]))
     assert w.run_id == a.run_id and w.config["anneal"]["init"] == "cco"
     assert store.config_hash(w.config) != store.config_hash(a.config)  # a warm start is a different run

@@ -82,14 +82,16 @@ def stored_config(run_cfg: RunConfig) -> dict:
     Settings that do not affect an anneal run are left out while they have their
     defaults (``method`` for an anneal from a random tree, ``anneal.init`` = random), so
     the config hash of an anneal run is the one it had before CCO existed and existing
-    stores keep resuming.
+    stores keep resuming. A CCO run holds no ``anneal`` section: no schedule changes it.
     """
     config = asdict(run_cfg)
     del config["sweep"], config["cluster"]  # how a run is scheduled is not part of it
     config.pop("stage", None)
     if run_cfg.method.name == "anneal" and run_cfg.anneal.init == "random":
         config.pop("method", None)
-    if run_cfg.anneal.init == "random":
+    if run_cfg.method.name == "cco":  # no schedule: anneal settings do not change a CCO tree
+        config.pop("anneal", None)
+    elif run_cfg.anneal.init == "random":
         config["anneal"].pop("init", None)
     return config
 
