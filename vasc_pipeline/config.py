@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 __all__ = ["ConfigError", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
-           "MethodConfig", "METHODS", "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
+           "MethodConfig", "METHODS",
+           "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
            "compose", "CONFIG_DIR"]
 
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
