@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 __all__ = ["ConfigError", "KEYS_ADDED_LATER", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
+           "MethodConfig", "METHODS",
            "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
            "scheduled_steps", "packing_steps",
            "compose", "CONFIG_DIR"]
@@ -45,7 +46,10 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
     "anneal.packing_T_end": 0.05,
+    "anneal.init": "random",
 }
+METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
+ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 
 
 class ConfigError(ValueError):
@@ -119,12 +123,24 @@ class AnnealConfig:
     polish: bool = False                 # optimise the final topology's bifurcation positions (geometry.polish)
     polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (geometry.descend_swaps)
     trace_every: int = 100_000           # steps between trace records
+    init: str = "random"                 # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.cco, method.* settings)
 
 
 @dataclass
 class TerminalsConfig:
     path: Optional[str] = None           # CSV of x, y, z (m)
     fixed: bool = False                  # fixed sites never move; the supply term is off
+
+
+@dataclass
+class MethodConfig:
+    """How the tree is grown: ``method=anneal`` (default) or ``method=cco`` (conf/method/)."""
+
+    name: str = "anneal"
+    candidates: int = 20                 # cco: nearest segments evaluated for each new terminal
+    max_tries: int = 10                  # cco: rejected sites before the distance criterion shrinks
+    shrink: float = 0.9                  # cco: factor of that shrink
+    order: str = "file"                  # cco with terminals.path: "file" order or a seeded "random" order
 
 
 @dataclass
@@ -142,6 +158,7 @@ class RunConfig:
     anneal: AnnealConfig = field(default_factory=AnnealConfig)
     terminals: TerminalsConfig = field(default_factory=TerminalsConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    method: MethodConfig = field(default_factory=MethodConfig)
     # The pipeline's groups (dataclasses at the end of this module): +sweep=NAME adds a
     # sweep, so it is optional; cluster is always present (cluster=local by default).
     sweep: Optional[SweepConfig] = None
@@ -191,7 +208,11 @@ def _check_finite(node: Any, name: str) -> None:
 
 def scheduled_steps(cfg: RunConfig) -> int:
     """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default
-    ``steps_at_1000 * (N / 1000)^steps_exponent``."""
+    ``steps_at_1000 * (N / 1000)^steps_exponent``. A CCO run (``method=cco``) counts terminals
+    added instead: N.
+    """
+    if cfg.method.name == "cco":
+        return int(cfg.n_terminals)
     if cfg.anneal.steps is not None:
         return int(cfg.anneal.steps)
     return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** cfg.anneal.steps_exponent)))
@@ -294,9 +315,25 @@ def validate(cfg: RunConfig) -> RunConfig:
                           f"{cfg.checkpoint.every_seconds}")
     if cfg.stage not in STAGES:
         raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
+    _validate_method(cfg)
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return cfg
+
+
+def _validate_method(cfg: RunConfig) -> None:
+    m = cfg.method
+    if m.name not in METHODS:
+        raise ConfigError(f"method.name: unknown method {m.name!r}; accepted: {', '.join(METHODS)} (method=cco)")
+    if cfg.anneal.init not in ANNEAL_INITS:
+        raise ConfigError(f"anneal.init must be one of {', '.join(ANNEAL_INITS)}, got {cfg.anneal.init!r}")
+    for name in ("candidates", "max_tries"):
+        if not isinstance(getattr(m, name), int) or getattr(m, name) < 1:
+            raise ConfigError(f"method.{name} must be an integer >= 1, got {getattr(m, name)}")
+    if not 0.0 < m.shrink < 1.0:
+        raise ConfigError(f"method.shrink must lie in (0, 1), got {m.shrink}")
+    if m.order not in ("file", "random"):
+        raise ConfigError(f"method.order must be 'file' or 'random', got {m.order!r}")
 
 
 def register_schema() -> None:

@@ -146,14 +146,22 @@ def supply_dtype(n_terminals: int) -> type:
 
 
 def initial_state(problem: Problem, seed: int) -> kernel.State:
-    """The random initial tree of (config, seed) with its caches, running sums and schedule filled.
+    """The initial tree of (config, seed) with its caches, running sums and schedule filled.
+
+    The tree is random (SPEC section 2), or with ``anneal.init=cco`` the CCO tree of
+    :func:`vasc_pipeline.cco.grow_tree` drawn from the run's generator.
 
     Temperatures left unset in the config (``anneal.T_start`` / ``anneal.T_end`` = None)
     are calibrated here (:func:`calibrate_schedule`) and kept in ``state.schedule``, so a
     resumed run uses the same ones.
     """
     rng = seed_state(seed)
-    tree = random_tree(problem.tissue, problem.physics.n_terminals, rng, problem.sites)
+    if problem.config.anneal.init == "cco":  # a constructive tree as the warm start (same generator)
+        from .cco import grow_tree
+
+        tree = grow_tree(problem, rng)[0]
+    else:
+        tree = random_tree(problem.tissue, problem.physics.n_terminals, rng, problem.sites)
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = kernel.State(

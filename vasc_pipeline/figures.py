@@ -90,6 +90,8 @@ def _reference_point(ds: xr.Dataset, dims: list[str], exclude: tuple[str, ...] =
         point["steps"] = ds["steps"].values.max()
     if "tissue" in dims and "tissue" not in exclude:
         point["tissue"] = ds["tissue"].values[0]
+    if "method" in dims and "method" not in exclude:  # "anneal" sorts first
+        point["method"] = ds["method"].values[0]
     return point
 
 
@@ -125,6 +127,8 @@ def _point_text(point: dict) -> str:
     parts = []
     if "tissue" in point:
         parts.append(str(point["tissue"]))
+    if "method" in point:
+        parts.append(str(point["method"]))
     if "m_b" in point:
         parts.append(_mb_text(float(point["m_b"])))
     if "steps" in point:
@@ -299,6 +303,8 @@ def _cells(ds: xr.Dataset, dims: list[str]) -> list[dict]:
 
 def _cell_title(point: dict) -> str:
     parts = [str(point["tissue"])] if "tissue" in point else []
+    if "method" in point:
+        parts.append(str(point["method"]))
     parts.append(f"N = {int(point['n_terminals'])}")
     parts.append(f"m_b = {float(point['m_b']):.4g}")
     if "steps" in point:

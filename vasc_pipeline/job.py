@@ -85,6 +85,8 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
             if not store.is_tidy():  # a crash between "complete" and tidying up
                 store.tidy()
             return _summary(job, store, "skipped", None, 0, time.perf_counter() - started, seen)
+        if problem.config.method.name == "cco":
+            return _run_cco(job, problem, store, started, cpu_started, report)
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", CheckpointWarning)
@@ -145,6 +147,34 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(job, store, "complete", resumed_from, session_steps, time.perf_counter() - started, seen,
                         time.process_time() - cpu_started)
+
+
+def _run_cco(job: Job, problem: engine.Problem, store: RunStore, started: float, cpu_started: float,
+             report: Reporter | None) -> dict[str, Any]:
+    """A CCO run (``method=cco``): grow, then write the store as an anneal run writes it.
+
+    Growth takes seconds, so there is no checkpoint: an interrupted CCO run starts again
+    from its first terminal (the same tree: the run is a function of (config, seed)).
+    The trace has one record per terminal added; ``steps_done`` is N.
+    """
+    from .cco import grow
+
+    store.record_resume(None)
+    store.write_start(problem.tissue, problem.physics.as_attrs())
+    store.set_trace_length(0)
+    result = grow(problem, job.coords["seed"])
+    trace_length = store.append_trace(result.trace, 0)
+    tree = result.tree
+    n = problem.physics.n_terminals
+    if report is not None:
+        report({"run_id": job.run_id, "cell": job.cell, "step": n, "total_steps": n, "cost": result.costs["total"]})
+    store.write_final(
+        parent=tree.parent, position=tree.position, radius=engine.node_radii(tree, problem.physics), kind=tree.kind,
+        physics=problem.physics.as_attrs(), cost=result.costs, cost_recomputed=result.costs_recomputed,
+        steps_done=n, trace_length=trace_length, wall_seconds=time.perf_counter() - started,
+        anneal={"method": "cco", "sites_drawn": result.tries, "distance_factor": result.distance_factor})
+    return _summary(job, store, "complete", None, n, time.perf_counter() - started, [],
+                    time.process_time() - cpu_started)
 
 
 def read_final_tree(path: str | Path) -> dict[str, np.ndarray]:

@@ -277,6 +277,10 @@ def compile_kernels() -> None:
     cfg.anneal.steps = 16
     cfg.anneal.trace_every = 8
     engine.run(cfg, seed=0)
+    from .cco import grow  # the CCO growth kernel too (method=cco, anneal.init=cco)
+
+    cfg.method.name = "cco"
+    grow(engine.build_problem(cfg), 0)
 
 
 def _security(cluster: ClusterConfig, server: bool):

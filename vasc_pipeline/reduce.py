@@ -13,8 +13,8 @@ orders shifted so that the highest is 11) is compared with Kassab et al. 1993.
 
 ``<output_dir>/summary.zarr`` is an xarray DataTree (Zarr v3, consolidated). Cell dims are
 ``n_terminals`` and ``m_b`` always, ``steps`` when the sweep had a steps axis and
-``tissue`` when the directory holds more than one tissue (otherwise ``tissue`` is a
-scalar coordinate). Groups:
+``tissue`` when the directory holds more than one tissue, ``method`` when it holds both
+anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
 
 - ``/morphometry``  (cell..., scheme, order): element and segment diameter/length mean, SD,
   SE and counts of the best tree; per cell ``best_seed``, ``best_run_id``, ``best_cost``,
@@ -70,6 +70,7 @@ _COST_META = {"total": _TRACE_META["total"], "volume": _TRACE_META["volume"], "p
               "pressure": _TRACE_META["pressure"]}
 _CELL_META = {
     "tissue": {"long_name": "tissue"},
+    "method": {"long_name": "how the tree was grown (anneal, cco)"},
     "n_terminals": {"long_name": "number of terminal nodes N", "units": "1"},
     "m_b": {"long_name": "metabolic cost of blood m_b", "units": "W m-3"},
     "steps": {"long_name": "proposed moves per run", "units": "1"},
@@ -98,6 +99,7 @@ class RunInfo:
     physics: dict[str, Any]
     statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
     config: dict[str, Any] = field(default_factory=dict, repr=False)   # the run's stored config
+    method: str = "anneal"       # "anneal" or "cco" (stores written before CCO existed are anneal runs)
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -175,7 +177,8 @@ def find_runs(output_dir: str | os.PathLike,
             steps=None if coords.get("steps") is None else int(coords["steps"]),
             steps_done=int(attrs.get("steps_done", 0)), wall_seconds=_float(attrs.get("wall_seconds")),
             cost=cost, physics=dict(attrs.get("physics") or {}), config=config,
-            statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()}))
+            statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()},
+            method=str(coords.get("method") or (config.get("method") or {}).get("name") or "anneal")))
     return sorted(runs, key=lambda r: r.run_id), skipped
 
 
@@ -211,6 +214,8 @@ def _cell_dims(runs: list[RunInfo]) -> list[str]:
         dims.append("steps")
     if len({r.tissue for r in runs}) > 1:
         dims.insert(0, "tissue")
+    if len({r.method for r in runs}) > 1:  # anneal and CCO runs side by side
+        dims.insert(0, "method")
     return dims
 
 
@@ -424,6 +429,10 @@ def build_summary(runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None 
     if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
         for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
             groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
+    if "method" not in dims:  # one method: likewise
+        method = runs[0].method
+        for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
+            groups[name] = groups[name].assign_coords(method=((), method, _CELL_META["method"]))
     for ds in groups.values():
         _strings_as_objects(ds, inplace=True)
     return xr.DataTree.from_dict(groups), best, dims
@@ -543,7 +552,7 @@ def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
                                   "kassab_diameter": "kassab_diameter_m", "model_length": "model_length_m",
                                   "kassab_length": "kassab_length_m"})
     front = keys + ["run_id", "artery", "order"]
-    drop = [c for c in ("tissue",) if c in frame.columns and c not in keys]
+    drop = [c for c in ("tissue", "method") if c in frame.columns and c not in keys]
     frame = frame.drop(columns=drop)
     return frame[front + [c for c in frame.columns if c not in front]].reset_index(drop=True)
 
@@ -556,7 +565,8 @@ def _comparison_summary_frame(summary: xr.DataTree) -> pd.DataFrame:
     keys = list(summary.attrs["cell_dims"])
     run_ids = summary["morphometry"]["best_run_id"].to_dataframe().reset_index()
     frame = frame.merge(run_ids[keys + ["best_run_id"]], on=keys).rename(columns={"best_run_id": "run_id"})
-    frame = frame[frame.run_id != ""].drop(columns=[c for c in ("tissue",) if c in frame.columns and c not in keys])
+    frame = frame[frame.run_id != ""].drop(columns=[c for c in ("tissue", "method") if c in frame.columns
+                                                    and c not in keys])
     return frame[keys + ["run_id", "artery"] + names].reset_index(drop=True)
 
 

@@ -22,7 +22,7 @@ from typing import Any
 from .config import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
 from .store import run_path
 
-__all__ = ["Job", "expand", "run_id", "cell_id", "job_config"]
+__all__ = ["Job", "expand", "run_id", "cell_id", "job_config", "stored_config"]
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,8 @@ class Job:
     cell : str
         The run id without the seed: runs of one cell differ only by seed.
     coords : dict
-        tissue, n_terminals, m_b [W m^-3], seed, steps (None without a steps axis).
+        tissue, n_terminals, m_b [W m^-3], seed, steps (None without a steps axis), method
+        ("anneal" or "cco").
     config : dict
         The run's own resolved config (plain types, no sweep or cluster section); paths
         are absolute so that workers anywhere find them.
@@ -59,14 +60,38 @@ def _number(value: float) -> str:
     return f"{value:.10g}".replace("e+", "e")
 
 
-def cell_id(tissue: str, n_terminals: int, m_b: float, steps: int | None = None) -> str:
+def cell_id(tissue: str, n_terminals: int, m_b: float, steps: int | None = None, method: str = "anneal") -> str:
     text = f"{tissue}-N{int(n_terminals)}-mb{_number(m_b)}"
-    return text if steps is None else f"{text}-S{int(steps)}"
+    text = text if steps is None else f"{text}-S{int(steps)}"
+    return text if method == "anneal" else f"{text}-{method}"  # anneal ids stay as they always were
 
 
-def run_id(tissue: str, n_terminals: int, m_b: float, seed: int, steps: int | None = None) -> str:
-    """``<tissue>-N<N>-mb<m_b>[-S<steps>]-s<seed>``: the grid coordinates, nothing else (cell id + seed)."""
-    return f"{cell_id(tissue, n_terminals, m_b, steps)}-s{int(seed)}"
+def run_id(tissue: str, n_terminals: int, m_b: float, seed: int, steps: int | None = None,
+           method: str = "anneal") -> str:
+    """``<tissue>-N<N>-mb<m_b>[-S<steps>][-<method>]-s<seed>``: the grid coordinates (cell id + seed).
+
+    The method appears only when it is not the anneal (``heart-N200-mb641.3-cco-s0``), so
+    the ids of anneal runs are those of stores written before CCO existed.
+    """
+    return f"{cell_id(tissue, n_terminals, m_b, steps, method)}-s{int(seed)}"
+
+
+def stored_config(run_cfg: RunConfig) -> dict:
+    """The config dict a run store holds: the resolved run config without sweep, cluster and stage.
+
+    Sections that cannot affect the run are left out: ``method`` (the CCO settings) for an
+    anneal from a random tree, ``anneal`` for a CCO run (no schedule changes it). Keys that
+    are new since older stores were written are handled by the hash
+    (:data:`vasc_pipeline.config.KEYS_ADDED_LATER`), so those stores keep resuming.
+    """
+    config = asdict(run_cfg)
+    del config["sweep"], config["cluster"]  # how a run is scheduled is not part of it
+    config.pop("stage", None)
+    if run_cfg.method.name == "anneal" and run_cfg.anneal.init == "random":
+        config.pop("method", None)
+    if run_cfg.method.name == "cco":
+        config.pop("anneal", None)
+    return config
 
 
 def _axis(name: str, values: Any, default: Any, kind: type, check, accepted: str) -> list:
@@ -122,15 +147,17 @@ def expand(cfg: Any) -> list[Job]:
     steps_axis = _axis("sweep.steps", sw.steps, None, int, lambda v: 1 <= v <= MAX_STEPS,
                        f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)") if has_steps else [None]
     tissue = cfg.tissue.name
+    method = cfg.method.name
+    if method == "cco" and has_steps:
+        raise ConfigError("sweep.steps (proposed moves) has no meaning for method=cco, which adds N terminals; "
+                          "drop the steps axis or use method=anneal")
     jobs = []
     for n, m_b, steps, seed in itertools.product(ns, mbs, steps_axis, seeds):
         run_cfg = validate(job_config(cfg, n, m_b, seed, steps))
-        rid = run_id(tissue, n, m_b, seed, steps)
-        config = asdict(run_cfg)
-        del config["sweep"], config["cluster"]  # how a run is scheduled is not part of it
-        config.pop("stage", None)
-        coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps}
-        jobs.append(Job(rid, cell_id(tissue, n, m_b, steps), coords, config,
+        rid = run_id(tissue, n, m_b, seed, steps, method)
+        config = stored_config(run_cfg)
+        coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps, "method": method}
+        jobs.append(Job(rid, cell_id(tissue, n, m_b, steps, method), coords, config,
                         str(run_path(run_cfg.output_dir, rid))))
     ids = [j.run_id for j in jobs]
     if len(set(ids)) != len(ids):  # two m_b equal to 10 significant digits
