@@ -264,3 +264,17 @@ def test_keys_added_later_at_their_neutral_value_keep_old_stores_valid(tmp_path)
     with pytest.raises(ConfigError, match=r"anneal\.packing_steps_per_terminal: '<absent>' \(stored\) vs 5\.0"):
         s.check_config(changed)
     assert "packing_steps_per_terminal" in j.config["anneal"]  # hashing never edits the caller's config
+
+
+def test_identity_differences_allow_sweep_axes_and_a_second_method_only(tmp_path):
+    def cfg(*overrides):
+        (j,) = sweep.expand(config.compose([*overrides, "tissue=sphere", f"output_dir={tmp_path}"]))
+        return j.config
+
+    base = cfg("n_terminals=16")
+    assert store.identity_differences(base, cfg("n_terminals=24", "seed=3", "physics.m_b=6413")) == []
+    assert store.identity_differences(base, cfg("n_terminals=16", "method=cco")) == []  # the method comparison
+    assert store.identity_differences(base, cfg("n_terminals=16", "anneal.p_swap=0.3")) == [
+        "anneal.p_swap: 0.5 (stored) vs 0.3 (requested)"]
+    assert store.identity_differences(base, cfg("method=cco", "physics.gamma=3.0")) == [
+        "physics.gamma: 2.1 (stored) vs 3.0 (requested)"]  # but nothing the two methods share

@@ -40,7 +40,7 @@ from typing import Any, Iterator, TextIO
 
 from . import config as _config
 from .config import ClusterConfig, ConfigError, RunConfig
-from .store import (STATUS_COMPLETE, RUNS_DIR, SWEEP_AXES, RunStore, StoreError, config_differences,
+from .store import (STATUS_COMPLETE, RUNS_DIR, SWEEP_AXES, RunStore, StoreError, identity_differences,
                     is_empty_leftover, verify_store)
 from .sweep import Job, cell_id, expand
 
@@ -133,7 +133,7 @@ def check_one_configuration(p: Plan) -> None:
     """Refuse a sweep whose runs would share an output_dir with runs of another configuration.
 
     Every store of an output_dir shares the configuration except the sweep axes
-    (``store.SWEEP_AXES``), and the runs of one cell (grid point without the seed) share their
+    (``store.SWEEP_AXES``; runs of another method share what both methods use), and the runs of one cell (grid point without the seed) share their
     number of proposed moves: otherwise the reduction's best seed of a cell would be picked
     across different physics or schedules. Unreadable stores are skipped here (see
     :func:`inspect_stores` and the reduction, which name them).
@@ -146,10 +146,11 @@ def check_one_configuration(p: Plan) -> None:
             attrs = RunStore.open(path, mode="r").attrs
         except StoreError:
             continue
-        diff = config_differences(attrs.get("config") or {}, first.config, ignore=SWEEP_AXES)
+        diff = identity_differences(attrs.get("config") or {}, first.config)
         coords = attrs.get("coords") or {}
         try:
-            cell = cell_id(coords["tissue"], coords["n_terminals"], coords["m_b"], coords.get("steps"))
+            cell = cell_id(coords["tissue"], coords["n_terminals"], coords["m_b"], coords.get("steps"),
+                           coords.get("method") or "anneal")
         except (KeyError, TypeError, ValueError):
             cell = None
         if cell in cell_steps and int(attrs.get("total_steps", -1)) != cell_steps[cell]:

@@ -52,7 +52,7 @@ import xarray as xr
 
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
-from .store import (RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, TRACE_FIELDS, RunStore, StoreError, config_differences,
+from .store import (RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, TRACE_FIELDS, RunStore, StoreError, identity_differences,
                     verify_store)
 
 __all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "check_one_configuration", "best_runs", "build_summary", "write_summary",
@@ -191,12 +191,12 @@ def check_one_configuration(output_dir: str | os.PathLike, runs: list[RunInfo]) 
     """
     first, problems = runs[0], []
     for r in runs[1:]:
-        diff = config_differences(r.config, first.config, ignore=SWEEP_AXES)
+        diff = identity_differences(r.config, first.config)
         if diff:
             problems.append(f"{r.run_id} differs from {first.run_id} in {'; '.join(diff)}")
     cells: dict[tuple, RunInfo] = {}
     for r in runs:
-        other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps), r)
+        other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps, r.method), r)
         if other.steps_done != r.steps_done:
             problems.append(f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell "
                             f"{other.steps_done}")

@@ -54,7 +54,7 @@ import zarr
 from .config import KEYS_ADDED_LATER, ConfigError
 
 __all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "StoreDamaged", "verify_store",
-           "is_empty_leftover", "run_path", "run_lock", "config_hash", "hashed_config", "config_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
+           "is_empty_leftover", "run_path", "run_lock", "config_hash", "hashed_config", "config_differences", "identity_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
 
 RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
@@ -191,8 +191,26 @@ def config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any],
     """Human-readable ``key: stored -> requested`` lines for every result-determining difference
     (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
     a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
+    def ignored(key: str) -> bool:  # an entry ending in "." ignores a whole section
+        return any(key == i or (i.endswith(".") and key.startswith(i)) for i in ignore)
+
     return [f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
-            for k in sorted(set(a) | set(b)) if k not in ignore and a.get(k, "<absent>") != b.get(k, "<absent>")]
+            for k in sorted(set(a) | set(b)) if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")]
+
+
+def _method(config: Mapping[str, Any]) -> str:
+    return str((config.get("method") or {}).get("name") or "anneal")
+
+
+def identity_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
+    """What keeps two runs out of one output_dir: every difference but the sweep axes.
+
+    Runs of different methods (``method=cco`` beside the anneal: the comparison the
+    reduction's ``method`` dimension is for) share everything but the sections only one of
+    them uses, ``anneal`` and ``method``.
+    """
+    ignore = SWEEP_AXES + (("anneal.", "method.") if _method(stored) != _method(requested) else ())
+    return config_differences(stored, requested, ignore=ignore)
 
 
 def _jsonable(value: Any) -> Any:
