@@ -102,11 +102,13 @@ def tree_measures(parent, position, radius, kind, n_down, n_inlets, gamma) -> di
 
     ds = morphometry(parent, position, radius, kind).sel(scheme="diameter_defined")
     orders = [int(o) for o in ds.order.values]
-    out = {"orders": orders,
-           "ratio_small": [None if not np.isfinite(v) else float(v) for v in ds.diameter_ratio_small_mean.values],
-           "ratio_large": [None if not np.isfinite(v) else float(v) for v in ds.diameter_ratio_large_mean.values],
-           "bifurcations": [int(v) for v in ds.bifurcation_count.values],
-           "symmetric_ratio": 2.0 ** (-1.0 / gamma)}
+    out = {
+        "orders": orders,
+        "ratio_small": [None if not np.isfinite(v) else float(v) for v in ds.diameter_ratio_small_mean.values],
+        "ratio_large": [None if not np.isfinite(v) else float(v) for v in ds.diameter_ratio_large_mean.values],
+        "bifurcations": [int(v) for v in ds.bifurcation_count.values],
+        "symmetric_ratio": 2.0 ** (-1.0 / gamma),
+    }
     out["kassab"] = {a: float(compare_with_kassab(ds, a).attrs["mean_abs_log10_ratio"]) for a in ARTERIES}
     out["trunks"] = [resample(t).tolist() for t in trunks(parent, position, n_down, n_inlets)]
     return out
@@ -119,12 +121,26 @@ def tree_measures(parent, position, radius, kind, n_down, n_inlets, gamma) -> di
 def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, wall: float, **extra) -> dict:
     from vasc_pipeline.engine import node_radii
 
-    m = tree_measures(tree.parent, tree.position, node_radii(tree, physics), tree.kind, tree.n_downstream,
-                      tree.n_inlets, physics.gamma)
-    return {"method": kind, "n": n, "seed": seed, "vascular": costs["volume"] + costs["power"],
-            "exclusion_scaled": w_o * costs["exclusion"],
-            "vascular_exclusion": costs["volume"] + costs["power"] + w_o * costs["exclusion"],
-            "wall_seconds": wall, **extra, **m}
+    m = tree_measures(
+        tree.parent,
+        tree.position,
+        node_radii(tree, physics),
+        tree.kind,
+        tree.n_downstream,
+        tree.n_inlets,
+        physics.gamma,
+    )
+    return {
+        "method": kind,
+        "n": n,
+        "seed": seed,
+        "vascular": costs["volume"] + costs["power"],
+        "exclusion_scaled": w_o * costs["exclusion"],
+        "vascular_exclusion": costs["volume"] + costs["power"] + w_o * costs["exclusion"],
+        "wall_seconds": wall,
+        **extra,
+        **m,
+    }
 
 
 def grow_sites(n: int, out: Path, extra: list[str]) -> tuple[Path, dict]:
@@ -135,9 +151,18 @@ def grow_sites(n: int, out: Path, extra: list[str]) -> tuple[Path, dict]:
     result = cco.grow(problem, 0)
     k = problem.physics.n_inlets
     path = out / f"sites_N{n}.csv"
-    np.savetxt(path, result.tree.position[k:k + n], delimiter=",", header="x,y,z", comments="")
-    row = _row("cco_grown", n, 0, result.costs_recomputed, problem.physics.weights[0], result.tree, problem.physics,
-               result.wall_seconds, sites_drawn=result.tries)
+    np.savetxt(path, result.tree.position[k : k + n], delimiter=",", header="x,y,z", comments="")
+    row = _row(
+        "cco_grown",
+        n,
+        0,
+        result.costs_recomputed,
+        problem.physics.weights[0],
+        result.tree,
+        problem.physics,
+        result.wall_seconds,
+        sites_drawn=result.tries,
+    )
     return path, row
 
 
@@ -149,15 +174,33 @@ def one_run(task: tuple) -> dict:
     if kind == "cco":
         problem = engine.build_problem(config.compose([*base, "method=cco", "method.order=random"]))
         result = cco.grow(problem, seed)
-        return _row(kind, n, seed, result.costs_recomputed, problem.physics.weights[0], result.tree, problem.physics,
-                    result.wall_seconds)
+        return _row(
+            kind,
+            n,
+            seed,
+            result.costs_recomputed,
+            problem.physics.weights[0],
+            result.tree,
+            problem.physics,
+            result.wall_seconds,
+        )
     cfg = config.compose([*base, "terminals.fixed=true", "anneal=fast", "anneal.trace_every=1000000"])
     result = engine.run(cfg, seed=seed)
     pol = result.anneal.get("polish", {})
     w_o = result.problem.physics.weights[0]
-    return _row(kind, n, seed, result.costs_recomputed, w_o, result.tree, result.problem.physics, result.wall_seconds,
-                vascular_before_polish=pol.get("vascular_before"), steps=result.steps,
-                total_before_polish=pol.get("total_before"))
+    return _row(
+        kind,
+        n,
+        seed,
+        result.costs_recomputed,
+        w_o,
+        result.tree,
+        result.problem.physics,
+        result.wall_seconds,
+        vascular_before_polish=pol.get("vascular_before"),
+        steps=result.steps,
+        total_before_polish=pol.get("total_before"),
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -199,39 +242,61 @@ def summarise(rows: list[dict]) -> dict:
                         acc.setdefault(o, []).append((s, l, c))
             for o in sorted(acc):
                 s, l, c = (np.array(v, dtype=float) for v in zip(*acc[o]))
-                tables["asymmetry"].append({"n": n, "method": k, "order": o, "trees": int(s.size),
-                                            "bifurcations": int(c.sum()),
-                                            "ds_dp": _mean_se(s), "dl_dp": _mean_se(l),
-                                            "symmetric": sel[0]["symmetric_ratio"]})
+                tables["asymmetry"].append(
+                    {
+                        "n": n,
+                        "method": k,
+                        "order": o,
+                        "trees": int(s.size),
+                        "bifurcations": int(c.sum()),
+                        "ds_dp": _mean_se(s),
+                        "dl_dp": _mean_se(l),
+                        "symmetric": sel[0]["symmetric_ratio"],
+                    }
+                )
             # trunk spread between seeds
             pairs = []
             for a, b in itertools.combinations(sel, 2):
-                pairs.append(float(np.mean([trunk_distance(np.array(ta), np.array(tb))
-                                            for ta, tb in zip(a["trunks"], b["trunks"])])))
+                pairs.append(
+                    float(
+                        np.mean(
+                            [trunk_distance(np.array(ta), np.array(tb)) for ta, tb in zip(a["trunks"], b["trunks"])]
+                        )
+                    )
+                )
             tables["order"].append({"n": n, "method": k, "pairs": len(pairs), "trunk_spread_m": _mean_se(pairs)})
-            tables["kassab"].append({"n": n, "method": k,
-                                     **{a: _mean_se(r["kassab"][a] for r in sel) for a in ARTERIES}})
+            tables["kassab"].append(
+                {"n": n, "method": k, **{a: _mean_se(r["kassab"][a] for r in sel) for a in ARTERIES}}
+            )
     return tables
 
 
 def print_tables(t: dict) -> None:
     print("\nenergy: vascular cost C_v + C_w [mW] (mean ± SE over seeds; same sites)")
-    print(f"{'N':>5} {'CCO grown':>12} {'CCO (random order)':>22} {'anneal':>20} {'anneal + polish':>20}"
-          f" {'CCO s':>8} {'anneal s':>9}")
+    print(
+        f"{'N':>5} {'CCO grown':>12} {'CCO (random order)':>22} {'anneal':>20} {'anneal + polish':>20}"
+        f" {'CCO s':>8} {'anneal s':>9}"
+    )
     for e in t["energy"]:
-        print(f"{e['n']:>5} {e['cco_grown_vascular'][0] * 1e3:>12.5g} {_fmt(*e['cco_vascular'][:2], 1e3):>22}"
-              f" {_fmt(*e['anneal_before_polish_vascular'][:2], 1e3):>20} {_fmt(*e['anneal_vascular'][:2], 1e3):>20}"
-              f" {e['cco_wall_seconds'][0]:>8.2f} {e['anneal_wall_seconds'][0]:>9.1f}")
+        print(
+            f"{e['n']:>5} {e['cco_grown_vascular'][0] * 1e3:>12.5g} {_fmt(*e['cco_vascular'][:2], 1e3):>22}"
+            f" {_fmt(*e['anneal_before_polish_vascular'][:2], 1e3):>20} {_fmt(*e['anneal_vascular'][:2], 1e3):>20}"
+            f" {e['cco_wall_seconds'][0]:>8.2f} {e['anneal_wall_seconds'][0]:>9.1f}"
+        )
     print("\n  with exclusion: C_v + C_w + (A_o/A_wv) C_o [mW]")
     for e in t["energy"]:
-        print(f"{e['n']:>5} {e['cco_grown_vascular_exclusion'][0] * 1e3:>12.5g}"
-              f" {_fmt(*e['cco_vascular_exclusion'][:2], 1e3):>22}"
-              f" {'':>20} {_fmt(*e['anneal_vascular_exclusion'][:2], 1e3):>20}")
+        print(
+            f"{e['n']:>5} {e['cco_grown_vascular_exclusion'][0] * 1e3:>12.5g}"
+            f" {_fmt(*e['cco_vascular_exclusion'][:2], 1e3):>22}"
+            f" {'':>20} {_fmt(*e['anneal_vascular_exclusion'][:2], 1e3):>20}"
+        )
     print("\nasymmetry by parent order (diameter-defined, trunk = 11): mean ± SE over seeds")
     print(f"{'N':>5} {'method':>7} {'order':>5} {'D_s/D_p':>16} {'D_l/D_p':>16} {'bif.':>6} {'2^(-1/γ)':>8}")
     for a in t["asymmetry"]:
-        print(f"{a['n']:>5} {a['method']:>7} {a['order']:>5} {_fmt(*a['ds_dp'][:2], 1, 3):>16}"
-              f" {_fmt(*a['dl_dp'][:2], 1, 3):>16} {a['bifurcations']:>6} {a['symmetric']:>8.3f}")
+        print(
+            f"{a['n']:>5} {a['method']:>7} {a['order']:>5} {_fmt(*a['ds_dp'][:2], 1, 3):>16}"
+            f" {_fmt(*a['dl_dp'][:2], 1, 3):>16} {a['bifurcations']:>6} {a['symmetric']:>8.3f}"
+        )
     print("\norder dependence: spread of the main trunks between seeds [mm] (mean ± SE over pairs)")
     for o in t["order"]:
         print(f"{o['n']:>5} {o['method']:>7} {_fmt(*o['trunk_spread_m'][:2], 1e3, 3):>16} ({o['pairs']} pairs)")
@@ -256,8 +321,14 @@ def speed(ns: list[int], repeats: int, extra: list[str]) -> list[dict]:
 
             t0, c0 = time.perf_counter(), time.process_time()
             tree, _, drawn, _ = cco.grow_tree(problem, seed_state(seed))
-            row = {"speed": True, "n": n, "seed": seed, "grow_wall_seconds": time.perf_counter() - t0,
-                   "grow_cpu_seconds": time.process_time() - c0, "sites_drawn": drawn}
+            row = {
+                "speed": True,
+                "n": n,
+                "seed": seed,
+                "grow_wall_seconds": time.perf_counter() - t0,
+                "grow_cpu_seconds": time.process_time() - c0,
+                "sites_drawn": drawn,
+            }
             rows.append(row)
             print(json.dumps(row), flush=True)
     return rows
@@ -268,8 +339,11 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--case", choices=sorted(CASES), default="heart")
     parser.add_argument("--n", type=int, nargs="+", default=[100, 500])
     parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--anneal-steps", type=int, help="anneal.steps of the anneal runs (default: the schedule's "
-                        "budget, 1e8 (N/1000)^2); use a separate --out")
+    parser.add_argument(
+        "--anneal-steps",
+        type=int,
+        help="anneal.steps of the anneal runs (default: the schedule's budget, 1e8 (N/1000)^2); use a separate --out",
+    )
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument("--out", type=Path, help="directory for sites, runs.jsonl and tables.json")
     parser.add_argument("--speed", action="store_true", help="only time CCO's growth (N = 1000 and 6000)")
@@ -298,8 +372,16 @@ def main(argv: list[str] | None = None) -> dict:
     def record(row: dict) -> None:
         rows.append(row)
         text = json.dumps(row)
-        print(json.dumps({k: v for k, v in row.items() if k not in ("trunks", "orders", "ratio_small", "ratio_large",
-                                                                      "bifurcations")}), flush=True)
+        print(
+            json.dumps(
+                {
+                    k: v
+                    for k, v in row.items()
+                    if k not in ("trunks", "orders", "ratio_small", "ratio_large", "bifurcations")
+                }
+            ),
+            flush=True,
+        )
         with runs_file.open("a") as f:
             f.write(text + "\n")
 

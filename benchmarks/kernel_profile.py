@@ -33,9 +33,11 @@ def ns_per_move(problem, base, model, frac: float, moves: int, warmup: int) -> t
     elapsed = time.perf_counter() - start
     c = state.counters - before
     acceptance = {}
-    for name, proposed in (("terminal", kernel.COUNTER_TERMINAL_PROPOSED),
-                           ("bifurcation", kernel.COUNTER_BIFURCATION_PROPOSED),
-                           ("swap", kernel.COUNTER_SWAP_PROPOSED)):
+    for name, proposed in (
+        ("terminal", kernel.COUNTER_TERMINAL_PROPOSED),
+        ("bifurcation", kernel.COUNTER_BIFURCATION_PROPOSED),
+        ("swap", kernel.COUNTER_SWAP_PROPOSED),
+    ):
         if c[proposed]:
             acceptance[name] = round(float(c[proposed + 1] / c[proposed]), 3)
     return elapsed / moves * 1e9, acceptance
@@ -44,7 +46,9 @@ def ns_per_move(problem, base, model, frac: float, moves: int, warmup: int) -> t
 def profile(n_terminals: int, moves: int, warmup: int, anneal: str) -> list[dict]:
     problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]))
     base = engine.initial_state(problem, seed=0)
-    engine.run_block(problem, engine.restore_state(problem, engine.state_arrays(base)), 1000)  # compile outside the timing
+    engine.run_block(
+        problem, engine.restore_state(problem, engine.state_arrays(base)), 1000
+    )  # compile outside the timing
     m = problem.model
     variants = {
         "all": m,
@@ -61,10 +65,16 @@ def profile(n_terminals: int, moves: int, warmup: int, anneal: str) -> list[dict
             ns[name], acc[name] = ns_per_move(problem, base, model, frac, moves, warmup)
         # Translations pick terminals and bifurcations equally often.
         ns["terminal_translate"] = 2 * ns["translate"] - ns["bifurcation_translate"]
-        rows.append({"n_terminals": n_terminals, "anneal": anneal, "phase": phase,
-                     "temperature": kernel.temperature(m, base, int(frac * m.total_steps)),
-                     "ns_per_move": {k: round(v) for k, v in ns.items()},
-                     "acceptance_all_moves": acc["all"]})
+        rows.append(
+            {
+                "n_terminals": n_terminals,
+                "anneal": anneal,
+                "phase": phase,
+                "temperature": kernel.temperature(m, base, int(frac * m.total_steps)),
+                "ns_per_move": {k: round(v) for k, v in ns.items()},
+                "acceptance_all_moves": acc["all"],
+            }
+        )
     return rows
 
 

@@ -38,20 +38,35 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--jobs", type=int, default=4, help="runs in the sweep (seeds)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--n-terminals", type=int, default=48)
-    ap.add_argument("--steps", type=int, default=20_000_000,
-                    help="proposed moves per run (default: jobs of ~30 s, so fixed start-up costs do not dominate)")
+    ap.add_argument(
+        "--steps",
+        type=int,
+        default=20_000_000,
+        help="proposed moves per run (default: jobs of ~30 s, so fixed start-up costs do not dominate)",
+    )
     ap.add_argument("--checkpoint-seconds", type=float, default=30.0)
-    ap.add_argument("--quick", action="store_true", help="2 jobs of 20000 moves, N = 12, 1 worker: checks the script runs")
+    ap.add_argument(
+        "--quick", action="store_true", help="2 jobs of 20000 moves, N = 12, 1 worker: checks the script runs"
+    )
     args = ap.parse_args(argv)
     if args.quick:
         args.jobs, args.workers, args.n_terminals, args.steps = 2, 1, 12, 20_000
 
     with tempfile.TemporaryDirectory() as out:
-        cfg = config.compose([
-            "+sweep=smoke", f"sweep.n_terminals=[{args.n_terminals}]", "sweep.m_b=[641.3]",
-            f"sweep.seeds=[{','.join(str(s) for s in range(args.jobs))}]", f"anneal.steps={args.steps}",
-            "anneal.trace_every=100000", f"checkpoint.every_seconds={args.checkpoint_seconds}",
-            f"cluster.n_workers={args.workers}", "cluster.dashboard_address=null", f"output_dir={out}"])
+        cfg = config.compose(
+            [
+                "+sweep=smoke",
+                f"sweep.n_terminals=[{args.n_terminals}]",
+                "sweep.m_b=[641.3]",
+                f"sweep.seeds=[{','.join(str(s) for s in range(args.jobs))}]",
+                f"anneal.steps={args.steps}",
+                "anneal.trace_every=100000",
+                f"checkpoint.every_seconds={args.checkpoint_seconds}",
+                f"cluster.n_workers={args.workers}",
+                "cluster.dashboard_address=null",
+                f"output_dir={out}",
+            ]
+        )
         jobs = sweep.expand(cfg)
         orchestrate.compile_kernels()
 
@@ -74,13 +89,17 @@ def main(argv: list[str] | None = None) -> None:
 
     session = {r["run_id"]: r["session_seconds"] for r in result["runs"]}
     in_job = [session[j.run_id] / t - 1.0 for j, t in zip(jobs, engine_seconds)]
-    print(f"{len(jobs)} runs of {args.steps:.3g} proposals, N = {args.n_terminals}, {args.workers} workers, "
-          f"checkpoints every {args.checkpoint_seconds:g} s")
+    print(
+        f"{len(jobs)} runs of {args.steps:.3g} proposals, N = {args.n_terminals}, {args.workers} workers, "
+        f"checkpoints every {args.checkpoint_seconds:g} s"
+    )
     print(f"  direct engine.run (process pool): {direct:8.2f} s wall (mean of {direct_a:.2f} and {direct_b:.2f})")
     print(f"  pipeline (LocalCluster + stores): {pipeline:8.2f} s wall")
     print(f"  end-to-end overhead:              {100 * (pipeline / direct - 1):+8.2f} %  (target < 3 %)")
-    print(f"  in-job overhead (median per run): {100 * statistics.median(in_job):+8.2f} %  "
-          "(checkpoints, trace, store writes)")
+    print(
+        f"  in-job overhead (median per run): {100 * statistics.median(in_job):+8.2f} %  "
+        "(checkpoints, trace, store writes)"
+    )
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ element level, orders shifted to 11): ``diameter_error_<artery>`` and
 ``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both),
 the same with the terminal order aligned on Kassab's order of nearest diameter
 (``..._terminal_aligned_<artery>``, shift in ``terminal_aligned_shift``), ``n_orders`` and
-``orders`` (per order: elements, segments per element, mean diameter [um], length [mm]). Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
+``orders`` (per order: elements, segments per element, mean diameter [um], length [mm]).
+Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
 (``--override``) needs a ``--label`` of its own: it names the variant's directory and rows.
 
     python benchmarks/time_to_quality.py --out results/ttq                 # N = 500, 1000, 2000
@@ -46,8 +47,16 @@ DEFAULT_SIZES = [500, 1000, 2000]
 LARGE_SIZES = [4000, 6000]
 
 
-def jobs_for(out: Path, schedule: str, budget: float, n: int, seeds: list[int], steps: int | None,
-             extra: list[str], label: str | None = None):
+def jobs_for(
+    out: Path,
+    schedule: str,
+    budget: float,
+    n: int,
+    seeds: list[int],
+    steps: int | None,
+    extra: list[str],
+    label: str | None = None,
+):
     """The pipeline jobs of one (schedule, budget, N): one per seed, in ``out/<label>/x<budget>``."""
     from vasc_pipeline import config, sweep
     from vasc_pipeline.config import scheduled_steps, to_run_config
@@ -56,8 +65,11 @@ def jobs_for(out: Path, schedule: str, budget: float, n: int, seeds: list[int], 
     if steps is None:
         steps = int(round(budget * scheduled_steps(to_run_config(config.compose(base)))))
     where = f"output_dir={out / (label or schedule) / f'x{budget:g}'}"
-    return [j for seed in seeds
-            for j in sweep.expand(config.compose([*base, f"anneal.steps={steps}", f"seed={seed}", where]))]
+    return [
+        j
+        for seed in seeds
+        for j in sweep.expand(config.compose([*base, f"anneal.steps={steps}", f"seed={seed}", where]))
+    ]
 
 
 def run_one(j) -> str:
@@ -77,23 +89,33 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
     a = store.attrs
     c = a["cost_recomputed"]
     w_o = a["physics"]["A_o"] / a["physics"]["A_wv"]
-    row = {"n_terminals": int(a["coords"]["n_terminals"]), "anneal": schedule, "budget": budget,
-           "steps": int(a["steps_done"]), "seed": int(a["seed"]), "wall_seconds": float(a["wall_seconds"]),
-           "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
-           "cost_supply": float(c["supply"]), "cost_vascular": float(c["volume"] + c["power"] + w_o * c["exclusion"]),
-           "cost_total": float(c["total"]),
-           "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan")))}
+    row = {
+        "n_terminals": int(a["coords"]["n_terminals"]),
+        "anneal": schedule,
+        "budget": budget,
+        "steps": int(a["steps_done"]),
+        "seed": int(a["seed"]),
+        "wall_seconds": float(a["wall_seconds"]),
+        "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
+        "cost_supply": float(c["supply"]),
+        "cost_vascular": float(c["volume"] + c["power"] + w_o * c["exclusion"]),
+        "cost_total": float(c["total"]),
+        "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
+    }
     tree = store.read_tree()
     morph = morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
     dds = morph.sel(scheme="diameter_defined")
     present = dds["element_count"] > 0
     row["n_orders"] = int(present.sum())
     row["orders"] = {  # per order (trunk = 11): what the errors are made of
-        int(o): {"elements": int(dds["element_count"].sel(order=o)),
-                 "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
-                 "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
-                 "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3}
-        for o in dds.order.values[present.values]}
+        int(o): {
+            "elements": int(dds["element_count"].sel(order=o)),
+            "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
+            "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
+            "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3,
+        }
+        for o in dds.order.values[present.values]
+    }
     # The alternative alignment (fidelity issue): the model's terminal order placed on the
     # Kassab order of nearest mean element diameter (LAD), instead of its trunk on order 11.
     lad = kassab_dataset().sel(artery="LAD", level="element")
@@ -115,13 +137,19 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """Mean and standard error over seeds per (N, schedule, budget)."""
-    names = ["wall_seconds", "moves_per_second", "cost_supply", "cost_vascular", "cavity_share", "n_orders",
-             *(f"{q}_error_{a}" for q in ("diameter", "length") for a in ARTERIES)]
+    names = [
+        "wall_seconds",
+        "moves_per_second",
+        "cost_supply",
+        "cost_vascular",
+        "cavity_share",
+        "n_orders",
+        *(f"{q}_error_{a}" for q in ("diameter", "length") for a in ARTERIES),
+    ]
     table = []
     for key in sorted({(r["n_terminals"], r["anneal"], r["budget"]) for r in rows}):
         sel = [r for r in rows if (r["n_terminals"], r["anneal"], r["budget"]) == key]
-        entry = {"n_terminals": key[0], "anneal": key[1], "budget": key[2], "steps": sel[0]["steps"],
-                 "seeds": len(sel)}
+        entry = {"n_terminals": key[0], "anneal": key[1], "budget": key[2], "steps": sel[0]["steps"], "seeds": len(sel)}
         for name in names:
             v = np.array([r[name] for r in sel], dtype=float)
             entry[name] = float(v.mean())
@@ -131,32 +159,48 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 
 def print_table(table: list[dict]) -> None:
-    print("\nmean ± SE over seeds (C_s voxels; vascular = C_v + C_w + A_o/A_wv C_o [W]; diameter error = "
-          "mean |log10 model/Kassab| RCA/LAD/LCX)")
-    print(f"{'N':>5} {'anneal':>8} {'x':>4} {'moves':>8} {'seeds':>5} {'wall s':>13} {'moves/s':>8} "
-          f"{'C_s':>20} {'vascular W':>19} {'cavity':>7} {'diameter error':>16} {'orders':>6}")
+    print(
+        "\nmean ± SE over seeds (C_s voxels; vascular = C_v + C_w + A_o/A_wv C_o [W]; diameter error = "
+        "mean |log10 model/Kassab| RCA/LAD/LCX)"
+    )
+    print(
+        f"{'N':>5} {'anneal':>8} {'x':>4} {'moves':>8} {'seeds':>5} {'wall s':>13} {'moves/s':>8} "
+        f"{'C_s':>20} {'vascular W':>19} {'cavity':>7} {'diameter error':>16} {'orders':>6}"
+    )
     for t in table:
         diam = "/".join(f"{t[f'diameter_error_{a}']:.3f}" for a in ARTERIES)
-        print(f"{t['n_terminals']:>5} {t['anneal']:>8} {t['budget']:>4g} {t['steps']:>8.2g} {t['seeds']:>5} "
-              f"{t['wall_seconds']:>7.0f} ±{t['wall_seconds_se']:<5.0f}{t['moves_per_second']:>8.3g} "
-              f"{t['cost_supply']:>10.0f} ±{t['cost_supply_se']:<8.0f}{t['cost_vascular']:>9.4g} "
-              f"±{t['cost_vascular_se']:<8.2g}{t['cavity_share']:>7.4f} {diam:>16} {t['n_orders']:>6.1f}")
+        print(
+            f"{t['n_terminals']:>5} {t['anneal']:>8} {t['budget']:>4g} {t['steps']:>8.2g} {t['seeds']:>5} "
+            f"{t['wall_seconds']:>7.0f} ±{t['wall_seconds_se']:<5.0f}{t['moves_per_second']:>8.3g} "
+            f"{t['cost_supply']:>10.0f} ±{t['cost_supply_se']:<8.0f}{t['cost_vascular']:>9.4g} "
+            f"±{t['cost_vascular_se']:<8.2g}{t['cavity_share']:>7.4f} {diam:>16} {t['n_orders']:>6.1f}"
+        )
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", help=f"N values (default {DEFAULT_SIZES})")
     parser.add_argument("--large", action="store_true", help=f"add N = {LARGE_SIZES}")
-    parser.add_argument("--anneal", nargs="+", default=["fast_v1", "fast"], help="anneal presets (default: fast_v1 fast)")
-    parser.add_argument("--budgets", type=float, nargs="+", default=[1.0],
-                        help="budgets in multiples of each schedule's default moves (default: 1)")
+    parser.add_argument(
+        "--anneal", nargs="+", default=["fast_v1", "fast"], help="anneal presets (default: fast_v1 fast)"
+    )
+    parser.add_argument(
+        "--budgets",
+        type=float,
+        nargs="+",
+        default=[1.0],
+        help="budgets in multiples of each schedule's default moves (default: 1)",
+    )
     parser.add_argument("--steps", type=int, help="exact moves per run instead of --budgets")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default: 0)")
     parser.add_argument("--workers", type=int, default=os.cpu_count(), help="runs side by side (one core each)")
     parser.add_argument("--out", type=Path, help="directory of the run stores and rows.jsonl")
     parser.add_argument("--override", action="append", default=[], help="extra config override, e.g. m_b=6413")
-    parser.add_argument("--label", help="name of this variant (default: the anneal preset); runs of a label share "
-                                        "one output directory, so a variant with --override needs its own label")
+    parser.add_argument(
+        "--label",
+        help="name of this variant (default: the anneal preset); runs of a label share "
+        "one output directory, so a variant with --override needs its own label",
+    )
     parser.add_argument("--quick", action="store_true", help="tiny runs (N = 40, 20000 moves) in a temporary dir")
     args = parser.parse_args(argv)
     if args.label and len(args.anneal) > 1:
@@ -177,11 +221,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         done = {r["store"]: r for r in map(json.loads, rows_file.read_text().splitlines())}
     wanted = []  # (job, schedule, budget)
     for schedule in args.anneal:
-        for budget in ([1.0] if steps else args.budgets):
+        for budget in [1.0] if steps else args.budgets:
             for n in sizes:
                 label = args.label or schedule
-                wanted += [(j, label, budget) for j in jobs_for(out, schedule, budget, n, args.seeds, steps,
-                                                                args.override, args.label)]
+                wanted += [
+                    (j, label, budget)
+                    for j in jobs_for(out, schedule, budget, n, args.seeds, steps, args.override, args.label)
+                ]
     todo = [w for w in wanted if w[0].store not in done]
     todo.sort(key=lambda w: -w[0].config["anneal"]["steps"])  # longest first: the pool finishes together
     by_store = {w[0].store: w for w in todo}

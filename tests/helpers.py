@@ -22,14 +22,27 @@ REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
 TIMEOUT = 240  # seconds any one subprocess may take before the test fails
 # A run of a few seconds: the size the reliability tests use.
-TINY_RUN = ["tissue=sphere", "n_terminals=16", "anneal.steps=2000", "anneal.trace_every=500",
-            "cluster.n_workers=1", "cluster.dashboard_address=null"]
+TINY_RUN = [
+    "tissue=sphere",
+    "n_terminals=16",
+    "anneal.steps=2000",
+    "anneal.trace_every=500",
+    "cluster.n_workers=1",
+    "cluster.dashboard_address=null",
+]
 
 
 def cli(*args: str, **kw) -> subprocess.Popen:
     """``python -m vasc_pipeline ARGS`` started (stdout and stderr piped, text)."""
-    return subprocess.Popen([sys.executable, "-m", "vasc_pipeline", *args], env=kw.pop("env", ENV),
-                            cwd=kw.pop("cwd", REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "vasc_pipeline", *args],
+        env=kw.pop("env", ENV),
+        cwd=kw.pop("cwd", REPO),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def finish(proc: subprocess.Popen) -> tuple[int, str]:

@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from vasc_pipeline import cco, config, engine, job, orchestrate, reduce as reduce_mod, store, sweep
+from vasc_pipeline import cco, config, engine, job, orchestrate, store, sweep
+from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.costs import full_costs
 from vasc_pipeline.geometry import best_topology, optimal_bifurcations, vascular_cost, vascular_weights
-from vasc_pipeline.physics import Physics, cost_tables
+from vasc_pipeline.physics import cost_tables
 from vasc_pipeline.rng import seed_state
 from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
 
@@ -38,8 +39,6 @@ def test_fermat_point_is_the_geometry_modules_optimum():
     """Three points, three weights: the kernel's point and cost equal optimal_bifurcations' on
     the tree inlet - b - (j, t), interior optima and collapsed ones (a heavy weight) alike."""
     gen = np.random.default_rng(5)
-    physics = Physics(n_terminals=2, n_inlets=1, gamma=2.1, inlet_radius=2e-3, total_flow=4e-6, m_b=641.3,
-                      viscosity=3.6e-3, supply_radius=1e-3)
     out = np.empty(3)
     collapsed = 0
     for trial in range(200):
@@ -78,8 +77,10 @@ def naive_grow(problem, rng):
     position[:k] = tissue.inlets
     sites = cco._site_order(problem, rng)
     first = random_terminal_sites(tissue, k, rng) if sites is None else sites[:k]
-    perm = min(itertools.permutations(range(k)),
-               key=lambda p: sum(np.linalg.norm(first[p[j]] - tissue.inlets[j]) for j in range(k)))
+    perm = min(
+        itertools.permutations(range(k)),
+        key=lambda p: sum(np.linalg.norm(first[p[j]] - tissue.inlets[j]) for j in range(k)),
+    )
     for j in range(k):
         parent[k + j] = j
         position[k + j] = first[perm[j]]
@@ -109,7 +110,7 @@ def naive_grow(problem, rng):
                 factor *= m.shrink
         before, nd = cost_of(parent, position)
         best = None
-        for j in segs[np.argsort(d, kind="stable")[:m.candidates]]:
+        for j in segs[np.argsort(d, kind="stable")[: m.candidates]]:
             trial_par, trial_pos = parent.copy(), position.copy()
             b_node, t_node = n + i, k + i
             trial_par[b_node], trial_par[j], trial_par[t_node] = parent[j], b_node, b_node
@@ -126,8 +127,14 @@ def naive_grow(problem, rng):
     return parent, position
 
 
-@pytest.mark.parametrize("overrides", [["tissue=plane2d", "n_terminals=30"], ["tissue=heart", "n_terminals=40"],
-                                       ["tissue=sphere", "n_terminals=25", "method.candidates=4"]])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["tissue=plane2d", "n_terminals=30"],
+        ["tissue=heart", "n_terminals=40"],
+        ["tissue=sphere", "n_terminals=25", "method.candidates=4"],
+    ],
+)
 def test_growth_equals_its_numpy_twin(overrides):
     problem = problem_of(*overrides)
     tree, trace, _, _ = cco.grow_tree(problem, seed_state(3))
@@ -138,8 +145,15 @@ def test_growth_equals_its_numpy_twin(overrides):
     assert trace[-1, 0] + trace[-1, 1] == pytest.approx(vascular_cost(tree.position, tree.parent, w), rel=1e-10)
 
 
-@pytest.mark.parametrize("overrides", [["tissue=plane2d", "n_terminals=64"], ["tissue=heart", "n_terminals=300"],
-                                       ["tissue=box", "n_terminals=100"], ["tissue=sphere", "n_terminals=80"]])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["tissue=plane2d", "n_terminals=64"],
+        ["tissue=heart", "n_terminals=300"],
+        ["tissue=box", "n_terminals=100"],
+        ["tissue=sphere", "n_terminals=80"],
+    ],
+)
 def test_invariants_determinism_and_stored_equals_recomputed(overrides):
     problem = problem_of(*overrides)
     a, b, c = cco.grow(problem, 0), cco.grow(problem, 0), cco.grow(problem, 1)
@@ -162,7 +176,7 @@ def test_heart_terminals_join_both_inlets_and_distance_criterion_spaces_sites():
     k = problem.physics.n_inlets
     assert k == 2 and np.all(r.tree.n_downstream[:k] > 10)
     # Random sites without the criterion come much closer to each other than CCO's.
-    sites = r.tree.position[k:k + 400]
+    sites = r.tree.position[k : k + 400]
     rand = random_terminal_sites(problem.tissue, 400, seed_state(2))
     from scipy.spatial import cKDTree
 
@@ -177,16 +191,19 @@ def test_given_sites_in_file_order_and_in_random_order(tmp_path):
     grown = cco.grow(problem, 4)
     k = problem.physics.n_inlets
     csv = tmp_path / "sites.csv"
-    np.savetxt(csv, grown.tree.position[k:k + 30], delimiter=",", header="x,y,z", comments="")
+    np.savetxt(csv, grown.tree.position[k : k + 30], delimiter=",", header="x,y,z", comments="")
     again = cco.grow(problem_of("tissue=sphere", "n_terminals=30", f"terminals.path={csv}"), 99)
     np.testing.assert_array_equal(again.tree.parent, grown.tree.parent)  # the same tree: file order = grown order
     np.testing.assert_allclose(again.tree.position, grown.tree.position, atol=1e-15)
-    shuffled = [cco.grow(problem_of("tissue=sphere", "n_terminals=30", f"terminals.path={csv}",
-                                    "method.order=random"), s) for s in (0, 1)]
+    shuffled = [
+        cco.grow(problem_of("tissue=sphere", "n_terminals=30", f"terminals.path={csv}", "method.order=random"), s)
+        for s in (0, 1)
+    ]
     assert not np.array_equal(shuffled[0].tree.parent, shuffled[1].tree.parent)
     for s in shuffled:
-        np.testing.assert_array_equal(np.sort(s.tree.position[k:k + 30], axis=0),
-                                      np.sort(grown.tree.position[k:k + 30], axis=0))
+        np.testing.assert_array_equal(
+            np.sort(s.tree.position[k : k + 30], axis=0), np.sort(grown.tree.position[k : k + 30], axis=0)
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -198,8 +215,9 @@ def test_exhaustive_optimum_and_fixed_terminal_anneal_never_above_cco(n, trials,
     """The exact optimum over every topology (geometry.best_topology) and the anneal (with its
     single-swap descent) on the same 4-6 fixed terminals are never above CCO's C_v + C_w."""
     for trial in range(trials):
-        sites = random_terminal_sites(engine.build_problem(config.compose(["tissue=plane2d"])).tissue, n,
-                                      seed_state(100 * n + trial))
+        sites = random_terminal_sites(
+            engine.build_problem(config.compose(["tissue=plane2d"])).tissue, n, seed_state(100 * n + trial)
+        )
         csv = tmp_path / f"s{trial}.csv"
         np.savetxt(csv, sites, delimiter=",", header="x,y,z", comments="")
         common = ["tissue=plane2d", f"n_terminals={n}", f"terminals.path={csv}", "terminals.fixed=true"]
@@ -234,10 +252,16 @@ def test_anneal_ids_and_stored_configs_are_unchanged_and_cco_ids_name_the_method
     assert store.config_hash(w.config) != store.config_hash(a.config)  # a warm start is a different run
 
 
-@pytest.mark.parametrize("override, field", [("method.name=foo", "method.name"), ("anneal.init=tree", "anneal.init"),
-                                             ("method.candidates=0", "method.candidates"),
-                                             ("method.shrink=1.5", "method.shrink"),
-                                             ("method.order=backwards", "method.order")])
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("method.name=foo", "method.name"),
+        ("anneal.init=tree", "anneal.init"),
+        ("method.candidates=0", "method.candidates"),
+        ("method.shrink=1.5", "method.shrink"),
+        ("method.order=backwards", "method.order"),
+    ],
+)
 def test_bad_method_settings_name_the_field(override, field):
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
         config.compose([override])
@@ -266,8 +290,16 @@ def test_anneal_init_cco_starts_from_the_cco_tree():
 
 def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     out = tmp_path / "both"
-    grid = ["tissue=sphere", "+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
-            "cluster.dashboard_address=null", "cluster.n_workers=1", f"output_dir={out}"]
+    grid = [
+        "tissue=sphere",
+        "+sweep=smoke",
+        "sweep.n_terminals=[16,24]",
+        "sweep.m_b=[641.3]",
+        "sweep.seeds=[0,1]",
+        "cluster.dashboard_address=null",
+        "cluster.n_workers=1",
+        f"output_dir={out}",
+    ]
     cfg = config.compose([*grid, "method=cco"])
     result = orchestrate.run_sweep(cfg, stream=io.StringIO())
     jobs = sweep.expand(cfg)
@@ -286,8 +318,15 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
         np.testing.assert_array_equal(s.read_tree()["parent"], grown.tree.parent)
         trace = xr.open_zarr(j.store, group="trace")
         assert trace.sizes["step"] == j.coords["n_terminals"] and int(trace.step[-1]) == j.coords["n_terminals"]
-        check_tree(Tree(grown.tree.parent, grown.tree.children, s.read_tree()["position"],
-                        grown.tree.n_downstream, grown.tree.n_inlets))
+        check_tree(
+            Tree(
+                grown.tree.parent,
+                grown.tree.children,
+                s.read_tree()["position"],
+                grown.tree.n_downstream,
+                grown.tree.n_inlets,
+            )
+        )
     before = {j.run_id: store.RunStore.open(j.store, mode="r").attrs["wall_seconds"] for j in jobs}
     summary = job.run_job(jobs[0])  # a finished CCO run is skipped, as an anneal run is
     assert summary["status"] == "skipped"
@@ -312,8 +351,21 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
 
 
 def test_comparison_benchmark_quick(tmp_path):
-    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "cco_comparison.py"), "--quick", "--workers", "1",
-                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=900, cwd=REPO)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "cco_comparison.py"),
+            "--quick",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        cwd=REPO,
+    )
     assert proc.returncode == 0, proc.stderr
     rows = [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()]
     assert {r["method"] for r in rows} == {"cco", "anneal", "cco_grown"}

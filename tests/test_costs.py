@@ -4,11 +4,9 @@ import math
 
 import numpy as np
 import pytest
+from helpers import make_problem
 
 from vasc_pipeline import costs, engine, kernel, tissue
-from vasc_pipeline.rng import seed_state
-
-from helpers import make_problem
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +56,9 @@ def test_kernel_traversal_equals_numpy_twin(sphere_problem):
     # Axis-parallel and degenerate segments exercise the d == 0 branches.
     c = t.origin + 0.5 * t.voxel_size * np.array(t.shape[::-1])
     for d in (np.array([0.01, 0, 0]), np.array([0, 0.01, 0]), np.array([0, 0, 0.01]), np.zeros(3)):
-        assert kernel.segment_exclusion(model, c - d, c + d) == pytest.approx(costs.exclusion_sum(c - d, c + d, t),
-                                                                             rel=1e-12, abs=1e-300)
+        assert kernel.segment_exclusion(model, c - d, c + d) == pytest.approx(
+            costs.exclusion_sum(c - d, c + d, t), rel=1e-12, abs=1e-300
+        )
 
 
 def test_segment_outside_tissue_costs_nothing(sphere_problem):
@@ -80,7 +79,7 @@ def test_supply_spheres_match_brute_force_voxel_for_voxel(sphere_problem):
     problem = sphere_problem
     state = engine.initial_state(problem, seed=5)
     k, n = problem.physics.n_inlets, problem.physics.n_terminals
-    terminals = state.position[k:k + n]
+    terminals = state.position[k : k + n]
     expected = costs.supply_counts(terminals, problem.tissue, problem.physics.supply_radius)
     got = np.where(state.supply < 0, 0, state.supply)
     np.testing.assert_array_equal(got, expected)
@@ -117,10 +116,10 @@ def test_kernel_pressures_match_numpy():
     kernel.pressure_cost(problem.model, state)
     np.testing.assert_allclose(state.scratch_pressure[1:], p_ref[1:], rtol=1e-12)
     k, n = 1, 40
-    c_p = np.sum((p_ref[k:k + n] - problem.physics.pressure_terminal) ** 2)
+    c_p = np.sum((p_ref[k : k + n] - problem.physics.pressure_terminal) ** 2)
     assert state.costs[kernel.PRESSURE] == pytest.approx(c_p, rel=1e-12)
     # Terminals see lower pressure than the inlet, deeper ones lower still.
-    assert np.all(p_ref[k:k + n] < problem.physics.pressure_inlet)
+    assert np.all(p_ref[k : k + n] < problem.physics.pressure_inlet)
 
 
 def _hollow_block(n=20, wall=6):
@@ -142,8 +141,9 @@ def test_cavity_share_is_the_large_vessels_length_inside_cavities():
     # node 0 inlet; node 1: a large vessel along x through the cavity (x = 1 .. 18 voxels, 8 inside);
     # node 2: a large vessel outside it; node 3: a small vessel through the cavity (not counted),
     # hanging from node 4, a small vessel outside it
-    position = np.array([[1.0, 10.0, 10.0], [18.0, 10.0, 10.0], [1.0, 1.0, 1.0], [10.0, 3.0, 10.0],
-                         [10.0, 17.0, 17.0]]) * h
+    position = (
+        np.array([[1.0, 10.0, 10.0], [18.0, 10.0, 10.0], [1.0, 1.0, 1.0], [10.0, 3.0, 10.0], [10.0, 17.0, 17.0]]) * h
+    )
     parent = np.array([-1, 0, 0, 4, 2])
     radius = np.array([0.0, 1e-3, 1e-3, 1e-4, 1e-4])
     share = costs.cavity_share(parent, position, radius, t)
@@ -153,7 +153,8 @@ def test_cavity_share_is_the_large_vessels_length_inside_cavities():
     radius[3] = 1e-3
     length3 = math.hypot(14.0, 7.0)
     assert costs.cavity_share(parent, position, radius, t) == pytest.approx(
-        (8.0 + 4.5 / 14.0 * length3) / (17.0 + 9.0 * math.sqrt(2.0) + length3), rel=1e-12)
+        (8.0 + 4.5 / 14.0 * length3) / (17.0 + 9.0 * math.sqrt(2.0) + length3), rel=1e-12
+    )
     no_cavity = tissue.Tissue("block", t.mask, h, t.origin, t.inlets)
     assert math.isnan(costs.cavity_share(parent, position, radius, no_cavity))
 
@@ -163,16 +164,19 @@ def test_mask_tissue_takes_a_second_mask_for_its_exclusion_domain(tmp_path):
     np.save(tmp_path / "tissue.npy", t.mask)
     np.save(tmp_path / "cavity.npy", t.cavity.astype(np.uint8) * 7)  # any nonzero value
     common = dict(voxel_size=1e-3, origin=[0.0, 0.0, 0.0], inlets=[[0.0, 0.0, 0.0]])
-    loaded = tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"),
-                                 exclusion_path=str(tmp_path / "cavity.npy"), **common)
+    loaded = tissue.build_tissue(
+        "mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "cavity.npy"), **common
+    )
     np.testing.assert_array_equal(loaded.exclusion, t.exclusion)
     np.testing.assert_array_equal(loaded.distance, t.distance)
     plain = tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), **common)
     np.testing.assert_array_equal(plain.exclusion, plain.mask)
     np.save(tmp_path / "wrong.npy", np.ones((4, 4, 4), dtype=np.uint8))
     with pytest.raises(tissue.TissueError, match=r"tissue\.exclusion_path: .*shape \(4, 4, 4\)"):
-        tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "wrong.npy"),
-                            **common)
+        tissue.build_tissue(
+            "mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "wrong.npy"), **common
+        )
     with pytest.raises(tissue.TissueError, match=r"tissue\.exclusion_path: mask file .* does not exist"):
-        tissue.build_tissue("mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "no.npy"),
-                            **common)
+        tissue.build_tissue(
+            "mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "no.npy"), **common
+        )

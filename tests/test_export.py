@@ -86,11 +86,21 @@ def test_two_inlet_forest_lines_follow_the_parents(tmp_path):
 
 
 def test_export_run_of_a_complete_store_and_refusal_of_a_running_one(tmp_path):
-    cfg = config.compose(["+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0]",
-                          "anneal.steps=5000", "anneal.trace_every=5000", f"output_dir={tmp_path}"])
+    cfg = config.compose(
+        [
+            "+sweep=smoke",
+            "sweep.n_terminals=[16]",
+            "sweep.m_b=[641.3]",
+            "sweep.seeds=[0]",
+            "anneal.steps=5000",
+            "anneal.trace_every=5000",
+            f"output_dir={tmp_path}",
+        ]
+    )
     (j,) = sweep.expand(cfg)
-    running = store.RunStore.create(tmp_path / "running.zarr", run_id="r", seed=0, config=j.config,
-                                    coords=j.coords, total_steps=5000)
+    running = store.RunStore.create(
+        tmp_path / "running.zarr", run_id="r", seed=0, config=j.config, coords=j.coords, total_steps=5000
+    )
     with pytest.raises(store.StoreError, match="running"):
         export_run(running.path, tmp_path / "out")
     job.run_job(j)

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import make_problem
 from scipy.optimize import minimize
+from test_kernel import assert_running_equals_full
 
 from vasc_pipeline import engine, finish, geometry, kernel
 from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
-
-from helpers import make_problem
-from test_kernel import assert_running_equals_full
 
 # --------------------------------------------------------------------------------------
 # Helpers
@@ -41,8 +40,9 @@ def _random_topology(n, rng):
 
 def _tree(parent, position):
     n = parent.size // 2
-    return Tree(parent, children_from_parent(parent), np.array(position, dtype=np.float64),
-                count_terminals(parent, n, 1), 1)
+    return Tree(
+        parent, children_from_parent(parent), np.array(position, dtype=np.float64), count_terminals(parent, n, 1), 1
+    )
 
 
 def _random_instance(n, ndim, rng):
@@ -61,8 +61,10 @@ def _clustered_instance(n, ndim, rng):
     nxt = n + 1
     while len(centre) > 1:
         keys = list(centre)
-        a, b = min(((a, b) for i, a in enumerate(keys) for b in keys[i + 1:]),
-                   key=lambda ab: np.linalg.norm(centre[ab[0]] - centre[ab[1]]))
+        a, b = min(
+            ((a, b) for i, a in enumerate(keys) for b in keys[i + 1 :]),
+            key=lambda ab: np.linalg.norm(centre[ab[0]] - centre[ab[1]]),
+        )
         parent[a] = parent[b] = nxt
         centre[nxt] = 0.5 * (centre.pop(a) + centre.pop(b))
         nxt += 1
@@ -106,8 +108,14 @@ def _scipy_optimum(tree, weights, rng, starts=4):
     for _ in range(starts):
         v = rng.uniform(lo[:ndim] / scale, hi[:ndim] / scale, (free.size, ndim)).ravel()
         for eps in (1e-2, 1e-4, 1e-6, 1e-8, 1e-11):
-            v = minimize(smooth, v, args=(eps,), jac=True, method="L-BFGS-B",
-                         options={"ftol": 1e-16, "gtol": 1e-13, "maxiter": 20000, "maxcor": 30}).x
+            v = minimize(
+                smooth,
+                v,
+                args=(eps,),
+                jac=True,
+                method="L-BFGS-B",
+                options={"ftol": 1e-16, "gtol": 1e-13, "maxiter": 20000, "maxcor": 30},
+            ).x
         position = tree.position.copy()
         position[free, :ndim] = unpack(v)[free] * scale
         c = geometry.vascular_cost(position, parent, weights)
@@ -233,8 +241,7 @@ def test_a_2d_optimum_stays_in_its_plane_and_inside_the_bounds():
     problem = make_problem("tissue=plane2d", "n_terminals=10")
     tree = _random_instance(10, 2, rng)
     tree.position[tree.kind == KIND_BIFURCATION, 2] = 0.0
-    res = geometry.optimal_bifurcations(tree, geometry.vascular_weights(tree, problem.physics),
-                                       problem.tissue.bounds)
+    res = geometry.optimal_bifurcations(tree, geometry.vascular_weights(tree, problem.physics), problem.tissue.bounds)
     assert np.all(res.position[:, 2] == 0.0)
     lo, hi = problem.tissue.bounds
     assert np.all(res.position >= lo) and np.all(res.position <= hi)
@@ -250,12 +257,11 @@ def test_topologies_are_every_rooted_binary_tree_once(n, count):
     for parent in geometry.topologies(n):
         assert parent[0] == -1 and np.all(parent[1:] >= 0)
         downstream = count_terminals(parent, n, 1)
-        assert downstream[0] == n and np.all(downstream[1:n + 1] == 1)
+        assert downstream[0] == n and np.all(downstream[1 : n + 1] == 1)
         children = children_from_parent(parent)
-        assert np.all(children[n + 1:] >= 0)  # every bifurcation has two children
+        assert np.all(children[n + 1 :] >= 0)  # every bifurcation has two children
         # A tree is its set of clusters (terminal sets below each bifurcation).
-        clusters = frozenset(frozenset(t for t in range(1, n + 1) if _below(parent, t, b))
-                             for b in range(n + 1, 2 * n))
+        clusters = frozenset(frozenset(t for t in range(1, n + 1) if _below(parent, t, b)) for b in range(n + 1, 2 * n))
         seen.add(clusters)
     assert len(seen) == count
 
@@ -275,8 +281,9 @@ def test_best_topology_beats_random_topologies_and_matches_its_own_list():
     inlet = problem.tissue.inlets[0]
     best, tree, each = geometry.best_topology(inlet, sites, problem.physics, problem.tissue.bounds)
     assert len(each) == 105 and best == min(each)
-    assert geometry.vascular_cost(tree.position, tree.parent,
-                                  geometry.vascular_weights(tree, problem.physics)) == pytest.approx(best, rel=1e-12)
+    assert geometry.vascular_cost(
+        tree.position, tree.parent, geometry.vascular_weights(tree, problem.physics)
+    ) == pytest.approx(best, rel=1e-12)
     for _ in range(5):
         position = np.zeros((10, 3))
         position[0], position[1:6] = inlet, sites
@@ -298,13 +305,14 @@ def _hot_state(*overrides, steps=20_000, seed=0):
     return problem, state
 
 
-@pytest.mark.parametrize("overrides", [("tissue=plane2d", "n_terminals=30"),
-                                       ("tissue=heart", "n_terminals=40")], ids=["plane2d", "heart"])
+@pytest.mark.parametrize(
+    "overrides", [("tissue=plane2d", "n_terminals=30"), ("tissue=heart", "n_terminals=40")], ids=["plane2d", "heart"]
+)
 def test_polish_never_raises_the_cost_and_leaves_the_topology_and_terminals_alone(overrides):
     problem, state = _hot_state(*overrides)
     k, n = problem.physics.n_inlets, problem.physics.n_terminals
     topology = (state.parent.copy(), state.children.copy(), state.n_downstream.copy())
-    fixed = state.position[:k + n].copy()
+    fixed = state.position[: k + n].copy()
     rng, counters = state.rng.copy(), state.counters.copy()
     report = finish.polish(problem, state)
     before, after = report["before"], report["after"]
@@ -313,7 +321,7 @@ def test_polish_never_raises_the_cost_and_leaves_the_topology_and_terminals_alon
     assert report["moved"] > 0 and report["applied"] in ("full", "partial")
     for old, new in zip(topology, (state.parent, state.children, state.n_downstream)):
         np.testing.assert_array_equal(old, new)
-    np.testing.assert_array_equal(state.position[:k + n], fixed)
+    np.testing.assert_array_equal(state.position[: k + n], fixed)
     np.testing.assert_array_equal(state.rng, rng)
     np.testing.assert_array_equal(state.counters, counters)
     assert after == assert_running_equals_full(problem, state)
@@ -326,11 +334,11 @@ def test_descend_swaps_only_lowers_the_cost_and_keeps_a_valid_tree():
     problem, state = _hot_state("tissue=plane2d", "n_terminals=7", steps=5_000, seed=3)
     finish.polish(problem, state)
     k, n = problem.physics.n_inlets, problem.physics.n_terminals
-    fixed = state.position[:k + n].copy()
+    fixed = state.position[: k + n].copy()
     before = kernel.scaled_total_without_supply(problem.model, state)
     applied = finish.descend_swaps(problem, state)
     assert_running_equals_full(problem, state)
     assert applied > 0  # a hot state's topology is far from the best
     assert kernel.scaled_total_without_supply(problem.model, state) < before
-    np.testing.assert_array_equal(state.position[:k + n], fixed)
+    np.testing.assert_array_equal(state.position[: k + n], fixed)
     assert finish.descend_swaps(problem, state) == 0  # a local minimum under single swaps

@@ -66,8 +66,9 @@ def test_dimensions_physiological(dims):
 
 def test_via_build_tissue_ignores_other_keys(caplog):
     with caplog.at_level(logging.INFO, logger="vasc_pipeline.heart"):
-        t = build_tissue("heart", 300, mass_g=218.0, density=1.06e3, voxel_size=None, radius=0.02,
-                         side=0.1, q_required=None)
+        t = build_tissue(
+            "heart", 300, mass_g=218.0, density=1.06e3, voxel_size=None, radius=0.02, side=0.1, q_required=None
+        )
     assert t.name == "heart" and t.ndim == 3
     assert any("g myocardium" in r.getMessage() for r in caplog.records)
 
@@ -143,11 +144,20 @@ def test_explicit_voxel_size():
     assert _mass_g(t) == pytest.approx(TARGET_G, rel=0.05)
 
 
-@pytest.mark.parametrize("field, value", [
-    ("mass_g", 0.0), ("mass_g", -5.0), ("mass_g", float("nan")), ("mass_g", "heavy"),
-    ("density", 0.0), ("density", -1.0), ("density", float("inf")),
-    ("voxel_size", -1e-3), ("voxel_size", 0.0),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("mass_g", 0.0),
+        ("mass_g", -5.0),
+        ("mass_g", float("nan")),
+        ("mass_g", "heavy"),
+        ("density", 0.0),
+        ("density", -1.0),
+        ("density", float("inf")),
+        ("voxel_size", -1e-3),
+        ("voxel_size", 0.0),
+    ],
+)
 def test_bad_parameters_name_the_field(field, value):
     with pytest.raises(TissueError, match=field):
         heart.heart_tissue(100, **{field: value})

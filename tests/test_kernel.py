@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
+from helpers import make_problem
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasc_pipeline import costs, engine, kernel
 from vasc_pipeline.tree import check_tree, count_terminals
-
-from helpers import make_problem
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
 
@@ -26,26 +25,32 @@ def assert_running_equals_full(problem, state):
 
 def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True):
     c = state.counters
-    pairs = [(kernel.COUNTER_BIFURCATION_PROPOSED, kernel.COUNTER_BIFURCATION_ACCEPTED),
-             (kernel.COUNTER_SWAP_PROPOSED, kernel.COUNTER_SWAP_ACCEPTED)]
+    pairs = [
+        (kernel.COUNTER_BIFURCATION_PROPOSED, kernel.COUNTER_BIFURCATION_ACCEPTED),
+        (kernel.COUNTER_SWAP_PROPOSED, kernel.COUNTER_SWAP_ACCEPTED),
+    ]
     if terminals_move:
         pairs.append((kernel.COUNTER_TERMINAL_PROPOSED, kernel.COUNTER_TERMINAL_ACCEPTED))
     for proposed, accepted in pairs:
         assert 0 < c[accepted] < c[proposed]
 
 
-@pytest.mark.parametrize("overrides", [
-    ("tissue=plane2d",),
-    ("tissue=sphere", "n_terminals=120"),
-    ("tissue=box", "n_terminals=120"),
-    ("tissue=heart", "n_terminals=120"),  # two inlets: subtrees move between LCA and RCA trees
-], ids=["plane2d", "sphere", "box", "heart"])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ("tissue=plane2d",),
+        ("tissue=sphere", "n_terminals=120"),
+        ("tissue=box", "n_terminals=120"),
+        ("tissue=heart", "n_terminals=120"),  # two inlets: subtrees move between LCA and RCA trees
+    ],
+    ids=["plane2d", "sphere", "box", "heart"],
+)
 def test_running_sums_equal_full_recomputation_after_a_million_moves(overrides):
     steps = 1_000_000
     problem = make_problem(*overrides, *COLD, f"anneal.steps={steps}")
     state = engine.initial_state(problem, seed=11)
     assert_running_equals_full(problem, state)
-    inlet_split_before = state.n_downstream[:problem.physics.n_inlets].copy()
+    inlet_split_before = state.n_downstream[: problem.physics.n_inlets].copy()
     engine.run_block(problem, state, steps)
     assert state.counters[kernel.COUNTER_STEP] == steps
     assert_moves_of_every_kind_accepted_and_rejected(state)
@@ -69,8 +74,14 @@ def test_fixed_terminals_never_move_and_supply_is_off(tmp_path):
     sites = engine.initial_state(base, seed=4).position[1:26]
     path = tmp_path / "sites.csv"
     np.savetxt(path, sites, delimiter=",", header="x,y,z", comments="")
-    problem = make_problem("tissue=sphere", "n_terminals=25", f"terminals.path={path}", "terminals.fixed=true",
-                           *COLD, "anneal.steps=300000")
+    problem = make_problem(
+        "tissue=sphere",
+        "n_terminals=25",
+        f"terminals.path={path}",
+        "terminals.fixed=true",
+        *COLD,
+        "anneal.steps=300000",
+    )
     assert not problem.terms.supply
     state = engine.initial_state(problem, seed=4)
     np.testing.assert_array_equal(state.position[1:26], sites)
@@ -102,11 +113,11 @@ def test_same_config_and_seed_give_identical_trees_and_block_splits_are_bit_iden
 
 # --- swap legality -------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def small_problem():
     # Huge temperature: every legal proposal is accepted, so legality alone decides.
-    return make_problem("tissue=box", "n_terminals=12", "anneal.T_start=1e300", "anneal.T_end=1e299",
-                        "anneal.steps=10")
+    return make_problem("tissue=box", "n_terminals=12", "anneal.T_start=1e300", "anneal.T_end=1e299", "anneal.steps=10")
 
 
 def ancestors(parent, node):
@@ -146,8 +157,10 @@ def test_swap_rejects_ancestors_and_siblings(small_problem):
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), pairs=st.lists(st.tuples(st.integers(1, 23), st.integers(1, 23)),
-                                                       min_size=1, max_size=60))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    pairs=st.lists(st.tuples(st.integers(1, 23), st.integers(1, 23)), min_size=1, max_size=60),
+)
 def test_random_swap_sequences_match_a_plain_reference(small_problem, seed, pairs):
     problem = small_problem
     state = engine.initial_state(problem, seed=seed % 1000)

@@ -8,10 +8,25 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasc_pipeline.morphometry import (asymmetry_ratios, asymmetry_statistics, check_tree_arrays, children_of,
-                                       compare_with_kassab, diameter_defined_strahler, elements, grouped_statistics,
-                                       inlet_of, morphometry, node_depth, order_statistics, segment_lengths,
-                                       select_trees, shift_orders, strahler_orders, topological_order)
+from vasc_pipeline.morphometry import (
+    asymmetry_ratios,
+    asymmetry_statistics,
+    check_tree_arrays,
+    children_of,
+    compare_with_kassab,
+    diameter_defined_strahler,
+    elements,
+    grouped_statistics,
+    inlet_of,
+    morphometry,
+    node_depth,
+    order_statistics,
+    segment_lengths,
+    select_trees,
+    shift_orders,
+    strahler_orders,
+    topological_order,
+)
 
 GAMMA = 2.1
 MM = 1e-3
@@ -37,8 +52,10 @@ def trunk_tree(diameters=None):
     """
     parent = np.array([-1, 0, 1, 1, 3, 3, 5, 5])
     kind = np.array([0, 1, 2, 1, 2, 1, 2, 2], dtype=np.int8)
-    position = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [2, 0, 0], [2, 2, 0], [3, 0, 0], [4, 0, 0],
-                         [6, 4, 0]], dtype=float) * MM
+    position = (
+        np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [2, 0, 0], [2, 2, 0], [3, 0, 0], [4, 0, 0], [6, 4, 0]], dtype=float)
+        * MM
+    )
     if diameters is None:  # Murray radii from the terminal counts n = [-, 4, 1, 3, 1, 2, 1, 1]
         n = np.array([0, 4, 1, 3, 1, 2, 1, 1])
         radius = np.where(n > 0, 10e-6 * n ** (1 / GAMMA), 0.0)
@@ -85,9 +102,9 @@ def random_tree(n_terminals, rng, noise=0.0, chain=False):
     parent = np.full(n, -1)
     kind = np.full(n, 1, dtype=np.int8)
     kind[0] = 0
-    kind[1:n_terminals + 1] = 2
+    kind[1 : n_terminals + 1] = 2
     ndown = np.zeros(n)
-    ndown[1:n_terminals + 1] = 1
+    ndown[1 : n_terminals + 1] = 1
     pool = list(range(1, n_terminals + 1))
     nxt = n_terminals + 1
     while len(pool) > 1:
@@ -438,8 +455,9 @@ def test_forest_with_two_inlets_in_scrambled_numbering():
     ds = morphometry(parent_p, position_p, radius_p, kind_p, top=None).sel(scheme="strahler")
     a = morphometry(pa, xa, ra, ka, top=None).sel(scheme="strahler")
     b = morphometry(pb, xb, rb, kb, top=None).sel(scheme="strahler")
-    total = a.element_count.reindex(order=ds.order, fill_value=0) + b.element_count.reindex(order=ds.order,
-                                                                                            fill_value=0)
+    total = a.element_count.reindex(order=ds.order, fill_value=0) + b.element_count.reindex(
+        order=ds.order, fill_value=0
+    )
     assert ds.element_count.values.tolist() == total.values.tolist() == [12, 5, 2, 1]
     assert ds.attrs["n_inlets"] == 2 and ds.attrs["n_segments"] == 22
     assert int(ds.bifurcation_count.sum()) == 3 + 7

@@ -13,21 +13,27 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import make_problem
 
 from vasc_pipeline import config, costs, engine, job, kernel, packing, sweep
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tree import check_tree
 
-from helpers import make_problem
-
 REPO = Path(__file__).resolve().parents[1]
-PACKED = ("tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.packing_steps_per_terminal=500",
-          "anneal.steps=60000", "anneal.trace_every=5000")
+PACKED = (
+    "tissue=sphere",
+    "n_terminals=40",
+    "anneal=fast",
+    "anneal.packing_steps_per_terminal=500",
+    "anneal.steps=60000",
+    "anneal.trace_every=5000",
+)
 
 
 def test_pack_block_equals_its_numpy_twin_move_for_move():
-    problem = make_problem("tissue=sphere", "n_terminals=12", "anneal=fast", "anneal.packing_steps_per_terminal=100",
-                           "anneal.steps=5000")
+    problem = make_problem(
+        "tissue=sphere", "n_terminals=12", "anneal=fast", "anneal.packing_steps_per_terminal=100", "anneal.steps=5000"
+    )
     fast, slow = engine.initial_state(problem, 3), engine.initial_state(problem, 3)
     p = problem.physics
     for n in (700, 300):  # within the phase: stale tree caches, exact supply
@@ -96,15 +102,28 @@ def test_block_splits_and_checkpoint_round_trips_across_the_phase_are_bit_identi
 
 
 def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
-    overrides = ["tissue=sphere", "n_terminals=300", "anneal=fast", "anneal.packing_steps_per_terminal=3000",
-                 "anneal.steps=1000000", "anneal.trace_every=20000", "checkpoint.every_seconds=0.01",
-                 f"output_dir={tmp_path}"]
+    overrides = [
+        "tissue=sphere",
+        "n_terminals=300",
+        "anneal=fast",
+        "anneal.packing_steps_per_terminal=3000",
+        "anneal.steps=1000000",
+        "anneal.trace_every=20000",
+        "checkpoint.every_seconds=0.01",
+        f"output_dir={tmp_path}",
+    ]
     (j,) = sweep.expand(config.compose(overrides))
     pack = 3000 * 300
-    script = ("import sys, json; from vasc_pipeline import job, sweep, config; "
-              "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)")
-    proc = subprocess.Popen([sys.executable, "-c", script, json.dumps(overrides)], cwd=REPO,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    script = (
+        "import sys, json; from vasc_pipeline import job, sweep, config; "
+        "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, json.dumps(overrides)],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     store_attrs = Path(j.store) / "zarr.json"
     killed_at = 0
     try:
@@ -129,13 +148,19 @@ def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
     np.testing.assert_array_equal(tree["position"], reference.tree.position)
 
 
-@pytest.mark.parametrize("overrides, message", [
-    (["anneal.packing_steps_per_terminal=1000", "anneal.steps=1000"], r"anneal\.packing_steps_per_terminal=1000 "
-                                                                     r"gives 16000 packing proposals"),
-    (["anneal.packing_steps_per_terminal=-1"], r"anneal\.packing_steps_per_terminal must be a finite number >= 0"),
-    (["anneal.packing_steps_per_terminal=10", "anneal.packing_T_end=0"], r"anneal\.packing_T_end must be"),
-    (["anneal.steps_exponent=5"], r"anneal\.steps_exponent must lie in \[0, 4\]"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (
+            ["anneal.packing_steps_per_terminal=1000", "anneal.steps=1000"],
+            r"anneal\.packing_steps_per_terminal=1000 "
+            r"gives 16000 packing proposals",
+        ),
+        (["anneal.packing_steps_per_terminal=-1"], r"anneal\.packing_steps_per_terminal must be a finite number >= 0"),
+        (["anneal.packing_steps_per_terminal=10", "anneal.packing_T_end=0"], r"anneal\.packing_T_end must be"),
+        (["anneal.steps_exponent=5"], r"anneal\.steps_exponent must lie in \[0, 4\]"),
+    ],
+)
 def test_bad_packing_settings_name_the_field(overrides, message):
     with pytest.raises(ConfigError, match=message):
         make_problem("tissue=sphere", "n_terminals=16", *overrides)
@@ -143,4 +168,4 @@ def test_bad_packing_settings_name_the_field(overrides, message):
 
 def test_budget_law_exponent():
     cfg = config.to_run_config(config.compose(["n_terminals=2000", "anneal=fast", "anneal.steps_exponent=1.5"]))
-    assert config.scheduled_steps(cfg) == round(1e8 * 2.0 ** 1.5)
+    assert config.scheduled_steps(cfg) == round(1e8 * 2.0**1.5)

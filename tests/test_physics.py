@@ -8,8 +8,16 @@ from vasc_pipeline.tree import Tree
 
 
 def coronary(**kw):
-    base = dict(n_terminals=1000, n_inlets=2, gamma=2.1, inlet_radius=2.1e-3, total_flow=4.16e-6, m_b=641.3,
-                viscosity=3.6e-3, supply_radius=3e-3)
+    base = dict(
+        n_terminals=1000,
+        n_inlets=2,
+        gamma=2.1,
+        inlet_radius=2.1e-3,
+        total_flow=4.16e-6,
+        m_b=641.3,
+        viscosity=3.6e-3,
+        supply_radius=3e-3,
+    )
     base.update(kw)
     return physics.Physics(**base)
 
@@ -68,7 +76,8 @@ def test_volume_and_poiseuille_power_of_a_two_terminal_tree_by_hand():
     assert result["volume"] == pytest.approx(641.3 * volume, rel=1e-12)
     q0 = 4.16e-6
     power = q0**2 * 8 * 3.6e-3 * 0.01 / (math.pi * r_root**4) + 2 * (q0 / 2) ** 2 * 8 * 3.6e-3 * leaf_len / (
-        math.pi * r_leaf**4)
+        math.pi * r_leaf**4
+    )
     assert result["power"] == pytest.approx(power, rel=1e-12)
     assert result["total"] == pytest.approx(result["volume"] + result["power"], rel=1e-15)
 
@@ -83,4 +92,5 @@ def test_default_voxel_size_follows_the_supply_radius_also_with_q_required(tissu
         problem = make_problem(f"tissue={tissue}", "n_terminals=200", "anneal.steps=10", *extra)
         assert problem.tissue.voxel_size == pytest.approx(problem.physics.supply_radius / 4.0, rel=rel)
     assert problem.physics.supply_radius == pytest.approx(
-        (3.0 * 4.16e-6 / 200 / 0.05 / (4.0 * math.pi)) ** (1.0 / 3.0), rel=1e-12)
+        (3.0 * 4.16e-6 / 200 / 0.05 / (4.0 * math.pi)) ** (1.0 / 3.0), rel=1e-12
+    )

@@ -24,15 +24,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from helpers import ENV, TIMEOUT, cli, finish, free_port  # noqa: E402
 
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
 from vasc_pipeline.tree import Tree, check_tree
 
-from helpers import ENV, REPO, TIMEOUT, cli, finish, free_port  # noqa: E402
-
-SMALL = ["+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
-         "anneal.steps=300000", "anneal.trace_every=20000", "checkpoint.every_seconds=0.1",
-         "cluster.dashboard_address=null"]
+SMALL = [
+    "+sweep=smoke",
+    "sweep.n_terminals=[16,24]",
+    "sweep.m_b=[641.3]",
+    "sweep.seeds=[0,1]",
+    "anneal.steps=300000",
+    "anneal.trace_every=20000",
+    "checkpoint.every_seconds=0.1",
+    "cluster.dashboard_address=null",
+]
 
 _references: dict[str, engine.RunResult] = {}
 
@@ -58,8 +64,9 @@ def assert_runs_match_references(cfg: config.RunConfig) -> None:
         tree = s.read_tree()
         np.testing.assert_array_equal(tree["parent"], ref.tree.parent, err_msg=j.run_id)
         np.testing.assert_array_equal(tree["position"], ref.tree.position, err_msg=j.run_id)
-        check_tree(Tree(tree["parent"], ref.tree.children, tree["position"], ref.tree.n_downstream, 1),
-                   ref.problem.tissue)
+        check_tree(
+            Tree(tree["parent"], ref.tree.children, tree["position"], ref.tree.n_downstream, 1), ref.problem.tissue
+        )
         trace = xr.open_zarr(j.store, group="trace")
         np.testing.assert_array_equal(trace["total"].values, ref.trace["total"])
         a = s.attrs
@@ -75,8 +82,11 @@ def store_attrs(path: Path) -> dict:
 
 def results_snapshot(out: Path) -> dict[str, str]:
     """Content hash of every file of every run store (the lock and Hydra's logs are not results)."""
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted((out / "runs").rglob("*")) if p.is_file() and ".locks" not in p.parts}
+    return {
+        str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted((out / "runs").rglob("*"))
+        if p.is_file() and ".locks" not in p.parts
+    }
 
 
 def wait_for(predicate, what: str, timeout: float = TIMEOUT, proc: subprocess.Popen | None = None):
@@ -140,8 +150,9 @@ def test_sigkill_of_the_sweep_then_rerun_resumes_and_ends_bit_identical(tmp_path
     # A checkpoint broken by the crash (or later) must be survived: corrupt the newest one, so
     # that the rerun falls back to the previous one (still past step 0).
     newest = store_attrs(victim)["checkpoint"]
-    chunk = next(p for p in (victim / "checkpoints" / newest / "position").rglob("*") if p.name != "zarr.json"
-                 and p.is_file())
+    chunk = next(
+        p for p in (victim / "checkpoints" / newest / "position").rglob("*") if p.name != "zarr.json" and p.is_file()
+    )
     chunk.write_bytes(chunk.read_bytes()[:3])
     code, output = finish(cli(*args))
     assert code == 0, output
@@ -157,13 +168,19 @@ def test_a_killed_worker_resumes_its_job_from_the_checkpoint(tmp_path):
 
     cfg = small(tmp_path)
     outcome: dict = {}
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+
         def sweep_thread():
             try:
                 outcome["result"] = orchestrate.run_sweep(cfg, client=client, stream=io.StringIO())
             except BaseException as exc:  # surfaced by the assertion below
                 outcome["error"] = exc
+
         thread = threading.Thread(target=sweep_thread)
         thread.start()
         victim = wait_for(lambda: checkpointed_running_run(tmp_path), "a checkpoint")
@@ -189,12 +206,34 @@ def test_an_existing_scheduler_by_address_gives_the_same_results(tmp_path):
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     dask_cli = [sys.executable, "-m", "dask"]
-    procs = [subprocess.Popen([*dask_cli, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
-                              env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs = [
+        subprocess.Popen(
+            [*dask_cli, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            env=ENV,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
     try:
-        procs.append(subprocess.Popen([*dask_cli, "worker", address, "--nthreads", "1", "--nworkers", "2", "--host",
-                                       "127.0.0.1", "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.DEVNULL))
+        procs.append(
+            subprocess.Popen(
+                [
+                    *dask_cli,
+                    "worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--nworkers",
+                    "2",
+                    "--host",
+                    "127.0.0.1",
+                    "--no-dashboard",
+                ],
+                env=ENV,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
         with Client(address, timeout="60s") as client:
             client.wait_for_workers(2, timeout=120)
         cfg = small(tmp_path, "cluster=address", f"cluster.address={address}")
@@ -234,20 +273,30 @@ def _bad(cfg: config.RunConfig, **changes) -> config.RunConfig:
     return cfg
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"n_terminals": 1, "sweep": None}, r"n_terminals must be an integer >= 2, got 1"),
-    ({"sweep__n_terminals": [1]}, r"sweep\.n_terminals\[0\] must be an integer >= 2"),
-    ({"sweep__m_b": [0.0]}, r"sweep\.m_b\[0\] must be a finite number > 0"),
-    ({"physics__m_b": -641.3, "sweep": None}, r"physics\.m_b must be a finite number > 0"),
-    ({"anneal__steps": 0}, r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
-    ({"sweep__steps": [-5]}, r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
-    ({"anneal__T_start": 1.0, "anneal__T_end": 1e12}, r"anneal\.T_end must be < anneal\.T_start"),
-    ({"tissue__name": "liver"}, r"tissue\.name: unknown tissue 'liver'; accepted: box, heart, mask"),
-    ({"tissue__name": "mask", "tissue__path": "/nonexistent/mask.npy", "tissue__voxel_size": 1e-3,
-      "tissue__inlets": [[0.0, 0.0, 0.0]]}, r"tissue\.path: mask file '/nonexistent/mask\.npy' does not exist"),
-    ({"anneal__T_end": 1e-8}, r"never mixed: anneal\.T_end: None \(stored\) vs 1e-08 \(requested\)"),
-    ({"sweep__seeds": [0, 1], "physics__viscosity": 4e-3}, r"physics\.viscosity: 0\.0036 \(stored\) vs 0\.004"),
-])
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"n_terminals": 1, "sweep": None}, r"n_terminals must be an integer >= 2, got 1"),
+        ({"sweep__n_terminals": [1]}, r"sweep\.n_terminals\[0\] must be an integer >= 2"),
+        ({"sweep__m_b": [0.0]}, r"sweep\.m_b\[0\] must be a finite number > 0"),
+        ({"physics__m_b": -641.3, "sweep": None}, r"physics\.m_b must be a finite number > 0"),
+        ({"anneal__steps": 0}, r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
+        ({"sweep__steps": [-5]}, r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
+        ({"anneal__T_start": 1.0, "anneal__T_end": 1e12}, r"anneal\.T_end must be < anneal\.T_start"),
+        ({"tissue__name": "liver"}, r"tissue\.name: unknown tissue 'liver'; accepted: box, heart, mask"),
+        (
+            {
+                "tissue__name": "mask",
+                "tissue__path": "/nonexistent/mask.npy",
+                "tissue__voxel_size": 1e-3,
+                "tissue__inlets": [[0.0, 0.0, 0.0]],
+            },
+            r"tissue\.path: mask file '/nonexistent/mask\.npy' does not exist",
+        ),
+        ({"anneal__T_end": 1e-8}, r"never mixed: anneal\.T_end: None \(stored\) vs 1e-08 \(requested\)"),
+        ({"sweep__seeds": [0, 1], "physics__viscosity": 4e-3}, r"physics\.viscosity: 0\.0036 \(stored\) vs 0\.004"),
+    ],
+)
 def test_bad_input_exits_non_zero_naming_the_field_and_touches_no_result(finished_output, changes, message):
     out, cfg = finished_output
     before = results_snapshot(out)
@@ -285,6 +334,7 @@ def test_a_resumed_run_whose_stored_config_changed_is_refused_before_any_job(tmp
     def crash(msg):
         if msg["step"] >= 100000:
             raise KeyboardInterrupt
+
     with pytest.raises(KeyboardInterrupt):
         job.run_job(j, report=crash)
     before = results_snapshot(tmp_path)
@@ -311,8 +361,7 @@ def test_a_second_concurrent_sweep_refuses_and_the_first_completes_intact(tmp_pa
     args = [*SMALL, f"output_dir={tmp_path}", "cluster.n_workers=2"]
     first = cli(*args)
     lock = tmp_path / orchestrate.LOCK_NAME
-    wait_for(lambda: lock.is_file() and f'"pid": {first.pid}' in lock.read_text(), "the first sweep's lock",
-             proc=first)
+    wait_for(lambda: lock.is_file() and f'"pid": {first.pid}' in lock.read_text(), "the first sweep's lock", proc=first)
     log = io.StringIO()
     assert orchestrate.main(small(tmp_path), stream=log) == 2
     assert f"is in use by another sweep (pid {first.pid}" in log.getvalue()
@@ -326,8 +375,16 @@ def test_a_second_concurrent_sweep_refuses_and_the_first_completes_intact(tmp_pa
 
 
 def test_single_run_default_goes_through_the_same_path(tmp_path):
-    code, output = finish(cli("tissue=plane2d", "n_terminals=8", "anneal.steps=20000", f"output_dir={tmp_path}",
-                              "cluster.n_workers=1", "cluster.dashboard_address=null"))
+    code, output = finish(
+        cli(
+            "tissue=plane2d",
+            "n_terminals=8",
+            "anneal.steps=20000",
+            f"output_dir={tmp_path}",
+            "cluster.n_workers=1",
+            "cluster.dashboard_address=null",
+        )
+    )
     assert code == 0, output
     (path,) = (tmp_path / "runs").glob("*.zarr")
     assert path.name == "plane2d-N8-mb641.3-s0.zarr"

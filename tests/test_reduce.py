@@ -19,12 +19,20 @@ import pandas as pd
 import pytest
 import xarray as xr
 
-from vasc_pipeline import config, job, morphometry, orchestrate, reduce as reduce_mod, store, sweep
+from vasc_pipeline import config, job, morphometry, orchestrate, store, sweep
+from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.reference import kassab_csv_path
 
 REPO = Path(__file__).resolve().parents[1]
-GRID = ["+sweep=smoke", "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3,6413.0]", "sweep.seeds=[0,1,2]",
-        "anneal.steps=50000", "anneal.trace_every=10000", "cluster.dashboard_address=null"]
+GRID = [
+    "+sweep=smoke",
+    "sweep.n_terminals=[16,24]",
+    "sweep.m_b=[641.3,6413.0]",
+    "sweep.seeds=[0,1,2]",
+    "anneal.steps=50000",
+    "anneal.trace_every=10000",
+    "cluster.dashboard_address=null",
+]
 GROUPS = ("morphometry", "asymmetry", "costs", "traces", "kassab", "comparison")
 
 
@@ -157,8 +165,9 @@ def test_comparison_table_stored_printed_and_csv(swept, summary):
     model_l = morph["element_length_mean"].sel(point).sel(scheme="diameter_defined")
     for artery in ("RCA", "LAD", "LCX"):
         c = comp.sel(point).sel(artery=artery)
-        both = (morph["element_count"].sel(point).sel(scheme="diameter_defined") > 0) & \
-            (kassab.D_n.sel(artery=artery) > 0).reindex(order=model_d.order, fill_value=False)
+        both = (morph["element_count"].sel(point).sel(scheme="diameter_defined") > 0) & (
+            kassab.D_n.sel(artery=artery) > 0
+        ).reindex(order=model_d.order, fill_value=False)
         orders = model_d.order[both].values
         assert orders.size >= 2
         ratio_d = np.log10(model_d.sel(order=orders).values / kassab.D_mean.sel(artery=artery, order=orders).values)
@@ -226,8 +235,16 @@ def test_best_trees_are_exported_as_vtp_and_csv(swept):
 
 
 def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_path):
-    run_all(tmp_path, "tissue=plane2d", "+sweep=convergence", "sweep.n_terminals=[16]", "sweep.seeds=[0,1]",
-            "sweep.steps=[10000,30000]", "anneal.trace_every=10000", "cluster.dashboard_address=null")
+    run_all(
+        tmp_path,
+        "tissue=plane2d",
+        "+sweep=convergence",
+        "sweep.n_terminals=[16]",
+        "sweep.seeds=[0,1]",
+        "sweep.steps=[10000,30000]",
+        "anneal.trace_every=10000",
+        "cluster.dashboard_address=null",
+    )
     result = reduce_mod.reduce(tmp_path, stream=io.StringIO())
     assert result.cell_dims == ["n_terminals", "m_b", "steps"]
     costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
@@ -242,11 +259,24 @@ def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_pa
 def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):
     with pytest.raises(reduce_mod.ReductionError, match="no complete run"):
         reduce_mod.reduce(tmp_path)
-    (j,) = run_all(tmp_path, *GRID[:1], "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0]",
-                   "anneal.steps=20000", "anneal.trace_every=10000")
+    (j,) = run_all(
+        tmp_path,
+        *GRID[:1],
+        "sweep.n_terminals=[16]",
+        "sweep.m_b=[641.3]",
+        "sweep.seeds=[0]",
+        "anneal.steps=20000",
+        "anneal.trace_every=10000",
+    )
     running = store.run_path(tmp_path, "sphere-N16-mb641.3-s9")
-    store.RunStore.create(running, run_id="sphere-N16-mb641.3-s9", seed=9, config=j.config,
-                          coords={**j.coords, "seed": 9}, total_steps=20000)
+    store.RunStore.create(
+        running,
+        run_id="sphere-N16-mb641.3-s9",
+        seed=9,
+        config=j.config,
+        coords={**j.coords, "seed": 9},
+        total_steps=20000,
+    )
     result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
     assert list(result.skipped) == [str(running)] and "running" in result.skipped[str(running)]
     costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
@@ -259,15 +289,25 @@ def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):
 def test_sweep_reduces_at_the_end_and_a_failed_reduction_loses_no_run(tmp_path, monkeypatch):
     from distributed import Client, LocalCluster
 
-    cfg = config.compose([*GRID, "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
-                          "anneal.steps=20000", f"output_dir={tmp_path}"])
+    cfg = config.compose(
+        [
+            *GRID,
+            "sweep.n_terminals=[16]",
+            "sweep.m_b=[641.3]",
+            "sweep.seeds=[0,1]",
+            "anneal.steps=20000",
+            f"output_dir={tmp_path}",
+        ]
+    )
 
     def broken(*args, **kwargs):
         raise RuntimeError("figure backend exploded")
 
     monkeypatch.setattr(reduce_mod, "reduce", broken)
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, \
-            Client(cl) as client:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl,
+        Client(cl) as client,
+    ):
         stream = io.StringIO()
         result = orchestrate.run_sweep(cfg, client=client, stream=stream)
     assert sorted(result["complete"]) == [j.run_id for j in sweep.expand(cfg)]
@@ -286,23 +326,43 @@ def test_stage_reduce_on_the_command_line(swept, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
     out = swept[0]
     before = (out / "runs").stat().st_mtime_ns
-    proc = subprocess.run([sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={out}"], env=env,
-                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={out}"],
+        env=env,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "mean |log10 model/Kassab|" in proc.stdout + proc.stderr
     assert (out / "runs").stat().st_mtime_ns == before  # no run was touched
     assert xr.open_datatree(out / "summary.zarr", engine="zarr").attrs["n_runs"] == 12
     # nothing to reduce: a clear error and status 2
-    proc = subprocess.run([sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={tmp_path / 'x'}"],
-                          env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={tmp_path / 'x'}"],
+        env=env,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 2 and "nothing to reduce" in proc.stderr
 
 
 def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary):
     assert np.isnan(summary["costs"]["cavity_share"].values).all()  # spheres have no cavity
-    jobs = run_all(tmp_path, "n_terminals=16", "anneal.steps=20000", "anneal.trace_every=10000",
-                   "+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]",
-                   "tissue=heart")
+    jobs = run_all(
+        tmp_path,
+        "n_terminals=16",
+        "anneal.steps=20000",
+        "anneal.trace_every=10000",
+        "+sweep=smoke",
+        "sweep.n_terminals=[16]",
+        "sweep.m_b=[641.3]",
+        "sweep.seeds=[0,1]",
+        "tissue=heart",
+    )
     result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
     shares = result.summary["costs"]["cavity_share"]
     for j in jobs:
@@ -313,10 +373,12 @@ def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary
 
 def test_figures_leave_the_callers_matplotlib_state_alone(swept):
     """Importing the figures module or drawing changes neither the backend nor rcParams."""
-    code = ("import matplotlib; matplotlib.use('svg'); matplotlib.rcParams['font.size'] = 13.0; "
-            "from vasc_pipeline import figures, reduce; import xarray as xr, sys; "
-            "figures.make_figures(xr.open_datatree(sys.argv[1] + '/summary.zarr', engine='zarr'), sys.argv[1]); "
-            "print(matplotlib.get_backend(), matplotlib.rcParams['font.size'], matplotlib.rcParams['savefig.bbox'])")
+    code = (
+        "import matplotlib; matplotlib.use('svg'); matplotlib.rcParams['font.size'] = 13.0; "
+        "from vasc_pipeline import figures, reduce; import xarray as xr, sys; "
+        "figures.make_figures(xr.open_datatree(sys.argv[1] + '/summary.zarr', engine='zarr'), sys.argv[1]); "
+        "print(matplotlib.get_backend(), matplotlib.rcParams['font.size'], matplotlib.rcParams['savefig.bbox'])"
+    )
     out = subprocess.run([sys.executable, "-c", code, str(swept[0])], capture_output=True, text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["svg", "13.0", "None"]

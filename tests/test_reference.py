@@ -8,8 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vasc_pipeline.reference import (ARTERIES, KASSAB_CSV_NAME, LEVELS, kassab_csv_path, kassab_dataset,
-                                     kassab_source, kassab_table)
+from vasc_pipeline.reference import (
+    ARTERIES,
+    KASSAB_CSV_NAME,
+    LEVELS,
+    kassab_csv_path,
+    kassab_dataset,
+    kassab_source,
+    kassab_table,
+)
 
 SHARED = Path("/work/shared/reference") / KASSAB_CSV_NAME
 
@@ -45,8 +52,12 @@ def test_dataset_values_equal_the_csv():
     assert len(rows) == 22 + 22 + 20
     for r in rows:
         cell = ds.sel(artery=r["artery"], level=r["level"], order=int(r["order"]))
-        for var, col, scale in (("D_mean", "D_mean_um", 1e-6), ("D_sd", "D_sd_um", 1e-6),
-                                ("L_mean", "L_mean_mm", 1e-3), ("L_sd", "L_sd_mm", 1e-3)):
+        for var, col, scale in (
+            ("D_mean", "D_mean_um", 1e-6),
+            ("D_sd", "D_sd_um", 1e-6),
+            ("L_mean", "L_mean_mm", 1e-3),
+            ("L_sd", "L_sd_mm", 1e-3),
+        ):
             expected = _num(r[col]) * scale
             got = float(cell[var])
             if math.isnan(expected):

@@ -21,13 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zarr
-
 from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish, free_port
+
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
-from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tissue import TissueError
-
 
 THREE_SEEDS = ["+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1,2]"]
 
@@ -45,8 +43,11 @@ def run_in_process(out: Path, *extra: str) -> list[sweep.Job]:
 
 
 def snapshot(out: Path) -> dict[str, str]:
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted((out / "runs").rglob("*")) if p.is_file() and ".locks" not in p.parts}
+    return {
+        str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted((out / "runs").rglob("*"))
+        if p.is_file() and ".locks" not in p.parts
+    }
 
 
 def chunk_files(array_dir: Path) -> list[Path]:
@@ -59,17 +60,26 @@ def chunk_files(array_dir: Path) -> list[Path]:
 def test_1_runs_of_another_configuration_are_refused_naming_the_keys(tmp_path):
     run_in_process(tmp_path, "anneal.steps=4000")
     before = snapshot(tmp_path)
-    for extra, text in [(["anneal.steps=2000", "physics.gamma=3.0", "seed=1"], "physics.gamma: 2.1 (stored) vs 3.0"),
-                        (["anneal.steps=2000", "seed=1"], "proposed moves of cell sphere-N16-mb641.3: 4000 (stored) "
-                                                          "vs 2000"),
-                        (["anneal.steps=4000", "anneal.p_swap=0.3", "n_terminals=24"], "anneal.p_swap: 0.5 (stored)")]:
+    for extra, text in [
+        (["anneal.steps=2000", "physics.gamma=3.0", "seed=1"], "physics.gamma: 2.1 (stored) vs 3.0"),
+        (["anneal.steps=2000", "seed=1"], "proposed moves of cell sphere-N16-mb641.3: 4000 (stored) vs 2000"),
+        (["anneal.steps=4000", "anneal.p_swap=0.3", "n_terminals=24"], "anneal.p_swap: 0.5 (stored)"),
+    ]:
         log = io.StringIO()
         assert orchestrate.main(tiny(tmp_path, *extra), stream=log) == 2, log.getvalue()
         assert "holds runs of another configuration" in log.getvalue() and text in log.getvalue(), log.getvalue()
     assert snapshot(tmp_path) == before
     # The sweep axes may differ: another seed, N or m_b (same steps per cell) joins the output_dir.
-    p = orchestrate.plan(tiny(tmp_path, "anneal.steps=4000", "+sweep=smoke", "sweep.seeds=[0,1]",
-                              "sweep.n_terminals=[16,24]", "sweep.m_b=[641.3,6413]"))
+    p = orchestrate.plan(
+        tiny(
+            tmp_path,
+            "anneal.steps=4000",
+            "+sweep=smoke",
+            "sweep.seeds=[0,1]",
+            "sweep.n_terminals=[16,24]",
+            "sweep.m_b=[641.3,6413]",
+        )
+    )
     orchestrate.inspect_stores(p)
     assert p.complete == {"sphere-N16-mb641.3-s0"} and not p.damaged
 
@@ -82,8 +92,10 @@ def test_1_a_directory_already_mixed_is_never_reduced(tmp_path):
     log = io.StringIO()
     assert orchestrate.reduce_stage(tiny(tmp_path, "+stage=reduce"), stream=log) == 2
     assert "holds runs of different configurations, which are never reduced together" in log.getvalue()
-    assert "sphere-N16-mb641.3-s1 differs from sphere-N16-mb641.3-s0 in physics.gamma: 3.0 (stored) vs 2.1" in \
-        log.getvalue(), log.getvalue()
+    assert (
+        "sphere-N16-mb641.3-s1 differs from sphere-N16-mb641.3-s0 in physics.gamma: 3.0 (stored) vs 2.1"
+        in log.getvalue()
+    ), log.getvalue()
     assert not (tmp_path / "summary.zarr").exists()
 
 
@@ -97,8 +109,10 @@ def test_2_seed_and_sweep_seeds_are_validated_alike(value):
         with pytest.raises(ConfigError) as info:
             config.compose(override.split())
         messages.append(str(info.value))
-    assert messages == [f"seed must be an integer in [0, 2^63), got {value}",
-                        f"sweep.seeds[0] must be an integer in [0, 2^63), got {value}"]
+    assert messages == [
+        f"seed must be an integer in [0, 2^63), got {value}",
+        f"sweep.seeds[0] must be an integer in [0, 2^63), got {value}",
+    ]
     config.compose(["seed=0"]), config.compose([f"seed={2**63 - 1}"])
 
 
@@ -109,8 +123,11 @@ def test_3_empty_output_dir_is_refused_and_reduce_never_creates_its_directory(tm
     work = tmp_path / "cwd"
     work.mkdir()
     missing = tmp_path / "missing"
-    procs = [cli(*TINY_RUN, "output_dir=", cwd=work), cli(*TINY_RUN, "output_dir=' '", cwd=work),
-             cli("+stage=reduce", f"output_dir={missing}", cwd=work)]
+    procs = [
+        cli(*TINY_RUN, "output_dir=", cwd=work),
+        cli(*TINY_RUN, "output_dir=' '", cwd=work),
+        cli("+stage=reduce", f"output_dir={missing}", cwd=work),
+    ]
     results = [finish(p) for p in procs]
     for code, output in results[:2]:
         assert code == 2 and "output_dir is empty" in output, output
@@ -124,14 +141,17 @@ def test_3_empty_output_dir_is_refused_and_reduce_never_creates_its_directory(tm
 # -- 4. never hang: bounds, a cluster with no worker, jobs the scheduler never starts -----------
 
 
-@pytest.mark.parametrize("override, message", [
-    ("anneal.steps=99999999999999999999999", r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
-    ("+sweep=smoke sweep.steps=[10000000000000000]", r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
-    ("anneal.trace_every=10000000000000000", r"anneal\.trace_every must be an integer in \[1, 1e\+15\]"),
-    ("checkpoint.every_seconds=1e9", r"checkpoint\.every_seconds must be <= 604800"),
-    ("anneal.steps_at_1000=1e30", r"anneal\.steps_at_1000=1e\+30 schedules"),
-    ("cluster.startup_timeout=0", r"cluster\.startup_timeout must be a finite number of seconds > 0"),
-])
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("anneal.steps=99999999999999999999999", r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
+        ("+sweep=smoke sweep.steps=[10000000000000000]", r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
+        ("anneal.trace_every=10000000000000000", r"anneal\.trace_every must be an integer in \[1, 1e\+15\]"),
+        ("checkpoint.every_seconds=1e9", r"checkpoint\.every_seconds must be <= 604800"),
+        ("anneal.steps_at_1000=1e30", r"anneal\.steps_at_1000=1e\+30 schedules"),
+        ("cluster.startup_timeout=0", r"cluster\.startup_timeout must be a finite number of seconds > 0"),
+    ],
+)
 def test_4_upper_bounds_are_validated(override, message, tmp_path):
     with pytest.raises(ConfigError, match=message):
         cfg = config.compose(override.split() + [f"output_dir={tmp_path}"])
@@ -141,9 +161,21 @@ def test_4_upper_bounds_are_validated(override, message, tmp_path):
 
 def test_4_a_scheduler_without_workers_stops_after_the_startup_timeout(tmp_path):
     port = free_port()
-    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                                  "--port", str(port), "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.DEVNULL)
+    scheduler = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "distributed.cli.dask_scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--no-dashboard",
+        ],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + TIMEOUT
         while True:
@@ -153,8 +185,14 @@ def test_4_a_scheduler_without_workers_stops_after_the_startup_timeout(tmp_path)
             assert time.monotonic() < deadline and scheduler.poll() is None, "scheduler did not start"
             time.sleep(0.1)
         started = time.monotonic()
-        code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", f"cluster.address=tcp://127.0.0.1:{port}",
-                                  "cluster.startup_timeout=3"))
+        code, output = finish(
+            cli(
+                *TINY_RUN,
+                f"output_dir={tmp_path}",
+                f"cluster.address=tcp://127.0.0.1:{port}",
+                "cluster.startup_timeout=3",
+            )
+        )
         assert code == 1, output
         assert "no Dask worker started within cluster.startup_timeout=3 s" in output, output
         assert f"dask worker tcp://127.0.0.1:{port}" in output
@@ -178,15 +216,21 @@ def test_4_jobs_no_worker_ever_starts_end_the_sweep(tmp_path):
     from distributed import Client, LocalCluster
 
     _GATE.clear()
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, \
-            Client(cl) as client:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl,
+        Client(cl) as client,
+    ):
         busy = client.map(_occupy, range(4), pure=False)  # more than the worker's share: the rest is queued
         try:
             started = time.monotonic()
-            with pytest.raises(orchestrate.SweepStartError, match=r"none of the 1 run started within "
-                                                                  r"cluster\.startup_timeout=3 s"):
-                orchestrate.run_sweep(tiny(tmp_path, "cluster.startup_timeout=3"), client=client,
-                                      stream=io.StringIO(), reduce=False)
+            with pytest.raises(
+                orchestrate.SweepStartError,
+                match=r"none of the 1 run started within "
+                r"cluster\.startup_timeout=3 s",
+            ):
+                orchestrate.run_sweep(
+                    tiny(tmp_path, "cluster.startup_timeout=3"), client=client, stream=io.StringIO(), reduce=False
+                )
             assert time.monotonic() - started < TIMEOUT
         finally:
             _GATE.set()
@@ -197,8 +241,9 @@ def test_4_jobs_no_worker_ever_starts_end_the_sweep(tmp_path):
 def test_4_slurm_without_sbatch_or_dask_jobqueue_is_refused_before_any_store(tmp_path):
     empty_path = tmp_path / "bin"
     empty_path.mkdir()
-    code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path / 'out'}", "cluster=slurm",
-                              env={**ENV, "PATH": str(empty_path)}))
+    code, output = finish(
+        cli(*TINY_RUN, f"output_dir={tmp_path / 'out'}", "cluster=slurm", env={**ENV, "PATH": str(empty_path)})
+    )
     assert code == 2, output
     assert "sbatch, which is not on PATH" in output or "needs dask-jobqueue" in output, output
     assert not (tmp_path / "out" / "runs").exists()
@@ -207,14 +252,17 @@ def test_4_slurm_without_sbatch_or_dask_jobqueue_is_refused_before_any_store(tmp
 # -- 5. finite floats; a deterministic failure says so ------------------------------------------
 
 
-@pytest.mark.parametrize("override, field", [
-    ("tissue.origin=[nan,0,0]", "tissue.origin[0]"),
-    ("tissue.inlets=[[nan,0.0,0.0]]", "tissue.inlets[0][0]"),
-    ("physics.m_b=nan", "physics.m_b"),
-    ("physics.A_s=inf", "physics.A_s"),
-    ("anneal.T_start=nan", "anneal.T_start"),
-    ("+sweep=smoke sweep.m_b=[641.3,inf]", "sweep.m_b[1]"),
-])
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("tissue.origin=[nan,0,0]", "tissue.origin[0]"),
+        ("tissue.inlets=[[nan,0.0,0.0]]", "tissue.inlets[0][0]"),
+        ("physics.m_b=nan", "physics.m_b"),
+        ("physics.A_s=inf", "physics.A_s"),
+        ("anneal.T_start=nan", "anneal.T_start"),
+        ("+sweep=smoke sweep.m_b=[641.3,inf]", "sweep.m_b[1]"),
+    ],
+)
 def test_5_every_float_must_be_finite(override, field):
     with pytest.raises(ConfigError, match=re.escape(f"{field} must be a finite number")):
         config.compose(override.split())
@@ -233,13 +281,19 @@ def test_5_a_deterministic_failure_is_not_retried_and_says_a_rerun_fails_the_sam
 
 
 def test_6_grids_too_large_or_too_coarse_and_bad_masks_are_refused(tmp_path):
-    with pytest.raises(TissueError, match=r"needs about .* GiB to build, more than the .* GiB of memory here; set a "
-                                          r"larger tissue\.voxel_size"):
+    with pytest.raises(
+        TissueError,
+        match=r"needs about .* GiB to build, more than the .* GiB of memory here; set a "
+        r"larger tissue\.voxel_size",
+    ):
         engine.build_problem(config.compose(["tissue=sphere", "tissue.voxel_size=1e-6"]))
     with pytest.raises(TissueError, match=r"GiB.*lower n_terminals"):
         engine.build_problem(config.compose(["tissue=sphere", "n_terminals=100000000", "anneal.steps=2000"]))
-    with pytest.raises(TissueError, match=r"tissue\.voxel_size=1 m is coarser than the supply sphere .* the largest "
-                                          r"accepted voxel_size is R_supply"):
+    with pytest.raises(
+        TissueError,
+        match=r"tissue\.voxel_size=1 m is coarser than the supply sphere .* the largest "
+        r"accepted voxel_size is R_supply",
+    ):
         engine.build_problem(config.compose(["tissue=sphere", "n_terminals=16", "tissue.voxel_size=1.0"]))
     mask = np.ones((4, 6, 6))
     mask[1, 2, 3] = np.nan
@@ -256,10 +310,12 @@ def test_6_grids_too_large_or_too_coarse_and_bad_masks_are_refused(tmp_path):
 
 
 def test_7_hydra_errors_exit_2_listing_the_accepted_options(tmp_path):
-    cases = [("tissue=liver", "accepted options for 'tissue': box, heart, mask, plane2d, sphere"),
-             ("anneal.stepz=5", "unknown config key 'anneal.stepz'; accepted keys at anneal: name, T_start"),
-             ("n_terminals=abc", "n_terminals: Value 'abc' of type 'str' could not be converted to Integer"),
-             ("+sweep=nope", "accepted options for 'sweep': convergence, mb_scan, size_scan, smoke")]
+    cases = [
+        ("tissue=liver", "accepted options for 'tissue': box, heart, mask, plane2d, sphere"),
+        ("anneal.stepz=5", "unknown config key 'anneal.stepz'; accepted keys at anneal: name, T_start"),
+        ("n_terminals=abc", "n_terminals: Value 'abc' of type 'str' could not be converted to Integer"),
+        ("+sweep=nope", "accepted options for 'sweep': convergence, mb_scan, size_scan, smoke"),
+    ]
     procs = [(cli(override, f"output_dir={tmp_path}"), text) for override, text in cases]
     for proc, text in procs:
         code, output = finish(proc)
@@ -273,8 +329,9 @@ def test_7_hydra_errors_exit_2_listing_the_accepted_options(tmp_path):
 def test_8_complete_stores_carry_checksums_of_tree_and_trace(tmp_path):
     (j,) = run_in_process(tmp_path)
     attrs = store.RunStore.open(j.store, mode="r").attrs
-    assert set(attrs["checksums"]) == {f"tree/{n}" for n in ("parent", "position", "radius", "kind")} | \
-        {f"trace/{f[0]}" for f in store.TRACE_FIELDS}
+    assert set(attrs["checksums"]) == {f"tree/{n}" for n in ("parent", "position", "radius", "kind")} | {
+        f"trace/{f[0]}" for f in store.TRACE_FIELDS
+    }
     store.verify_store(j.store)
     # Rewrite a tree array with other (validly encoded) values: only the checksum can tell.
     position = zarr.open_group(j.store, mode="r+")["tree/position"]
@@ -290,19 +347,23 @@ def test_8_a_sweep_leaves_damaged_stores_out_naming_them_and_runs_the_others(tmp
     def crash(msg):
         if msg["step"] >= 1500:
             raise KeyboardInterrupt
+
     with pytest.raises(KeyboardInterrupt):
         job.run_job(unfinished, report=crash)
     chunk = chunk_files(Path(unfinished.store) / "trace" / "total")[0]
-    chunk.write_bytes(chunk.read_bytes()[:5])            # a truncated trace chunk
+    chunk.write_bytes(chunk.read_bytes()[:5])  # a truncated trace chunk
     job.run_job(gone)
-    (Path(gone.store) / "zarr.json").unlink()            # a finished store without its root metadata
+    (Path(gone.store) / "zarr.json").unlink()  # a finished store without its root metadata
     before = snapshot(tmp_path)
     code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", *THREE_SEEDS, "checkpoint.every_seconds=1e-6"))
     assert code == 1, output
     assert "1 completed now" in output and "2 left out (damaged store)" in output, output
     for j, what in [(unfinished, "trace cannot be read"), (gone, "no zarr.json")]:
-        assert re.search(rf"left out: {j.run_id}: run store '{re.escape(j.store)}' is damaged: [^\n]*{what}[^\n]*"
-                         rf"Move it aside", output), output
+        assert re.search(
+            rf"left out: {j.run_id}: run store '{re.escape(j.store)}' is damaged: [^\n]*{what}[^\n]*"
+            rf"Move it aside",
+            output,
+        ), output
     assert store.RunStore.open(fresh.store, mode="r").status == "complete"
     after = snapshot(tmp_path)
     assert {k: v for k, v in after.items() if fresh.run_id not in k} == before  # the damaged ones left as they were
@@ -317,14 +378,17 @@ def test_8_the_reduction_names_damaged_stores_and_exits_1(tmp_path):
         chunk = chunk_files(Path(j.store) / "tree" / "position")[0]
         chunk.write_bytes(chunk.read_bytes()[:7])
     bare = store.run_path(tmp_path, "sphere-N16-mb641.3-s9")
-    (bare / "tree").mkdir(parents=True)                  # a store without zarr.json
+    (bare / "tree").mkdir(parents=True)  # a store without zarr.json
     log = io.StringIO()
     code = orchestrate.reduce_stage(tiny(tmp_path, "+stage=reduce"), stream=log)
     text = log.getvalue()
     assert code == 1, text
     assert "reduced 1 complete runs in 1 cells (3 stores left out)" in text, text
-    for path, what in [(best.store, "final tree or trace cannot be read"), (other.store, "cannot be read"),
-                       (str(bare), "no zarr.json")]:
+    for path, what in [
+        (best.store, "final tree or trace cannot be read"),
+        (other.store, "cannot be read"),
+        (str(bare), "no zarr.json"),
+    ]:
         assert f"left out: run store '{path}' is damaged: " in text and what in text, text
     assert "Traceback" not in text
 
@@ -360,8 +424,10 @@ def test_9_the_dashboard_link_is_printed_only_when_bokeh_can_draw_it(tmp_path):
     from distributed import Client, LocalCluster
 
     cfg = tiny(tmp_path, "cluster.dashboard_address=127.0.0.1:0")
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, \
-            Client(cl) as client:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl,
+        Client(cl) as client,
+    ):
         log = io.StringIO()
         orchestrate.run_sweep(cfg, client=client, stream=log, reduce=False)
     if importlib.util.find_spec("bokeh") is None:
@@ -376,8 +442,9 @@ def test_9_the_dashboard_link_is_printed_only_when_bokeh_can_draw_it(tmp_path):
 
 def test_10_missing_dask_jobqueue_is_refused_before_any_store(tmp_path, monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "dask_jobqueue" else
-                        real(name, *a))
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "dask_jobqueue" else real(name, *a)
+    )
     log = io.StringIO()
     assert orchestrate.main(tiny(tmp_path, "cluster=slurm"), stream=log) == 2
     assert "cluster=slurm needs dask-jobqueue: pip install 'vasc_pipeline[slurm]'" in log.getvalue()
@@ -387,8 +454,16 @@ def test_10_missing_dask_jobqueue_is_refused_before_any_store(tmp_path, monkeypa
 def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
     pytest.importorskip("dask_jobqueue")
     pytest.importorskip("cryptography")
-    code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "cluster=slurm", "cluster.dry_run=true",
-                              "cluster.slurm.walltime=01:00:00", "cluster.dashboard_address=null"))
+    code, output = finish(
+        cli(
+            *TINY_RUN,
+            f"output_dir={tmp_path}",
+            "cluster=slurm",
+            "cluster.dry_run=true",
+            "cluster.slurm.walltime=01:00:00",
+            "cluster.dashboard_address=null",
+        )
+    )
     assert code == 0, output
     assert "dry run: 1 run of 1 would run" in output and "sphere-N16-mb641.3-s0 (2000 proposed moves; new)" in output
     assert "#SBATCH -t 01:00:00" in output and "distributed.cli.dask_worker" in output, output
@@ -401,9 +476,16 @@ def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
 def test_11_help_describes_the_package(tmp_path):
     code, output = finish(cli("--help"))
     assert code == 0, output
-    for text in ("simulated annealing", "+sweep=NAME", "+stage=reduce", "Exit status: 0", "2 bad input",
-                 "<output_dir>/runs/<run_id>.zarr", "tissue: box, heart, mask, plane2d, sphere",
-                 "cluster.startup_timeout"):
+    for text in (
+        "simulated annealing",
+        "+sweep=NAME",
+        "+stage=reduce",
+        "Exit status: 0",
+        "2 bad input",
+        "<output_dir>/runs/<run_id>.zarr",
+        "tissue: box, heart, mask, plane2d, sphere",
+        "cluster.startup_timeout",
+    ):
         assert text in output, text
 
 
@@ -415,8 +497,10 @@ class Terminal(io.StringIO):
 def test_11_the_last_progress_line_ends_before_the_summary(tmp_path):
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, \
-            Client(cl) as client:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl,
+        Client(cl) as client,
+    ):
         log = Terminal()
         orchestrate.run_sweep(tiny(tmp_path), client=client, stream=log, reduce=False)
     text = log.getvalue()
@@ -432,6 +516,7 @@ def test_12_a_failed_figure_stage_sets_the_exit_status_and_keeps_the_runs(tmp_pa
 
     def broken(*args, **kwargs):
         raise ValueError("cannot draw two terminals")
+
     monkeypatch.setattr(figures, "make_figures", broken)
     log = io.StringIO()
     assert orchestrate.main(tiny(tmp_path, "cluster.n_workers=1"), stream=log) == 1, log.getvalue()

@@ -4,15 +4,14 @@ import math
 
 import numpy as np
 import pytest
+from helpers import make_problem
+from test_kernel import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full
 
-from vasc_pipeline import config, costs, engine, geometry, job, kernel, sweep
+from vasc_pipeline import config, engine, geometry, job, kernel, sweep
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.physics import cost_tables
 from vasc_pipeline.store import RunStore
 from vasc_pipeline.tree import check_tree
-
-from helpers import make_problem
-from test_kernel import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full
 
 
 def cells_consistent(problem, state):
@@ -27,17 +26,20 @@ def cells_consistent(problem, state):
             prev, x = x, state.cell_next[x]
     k = problem.physics.n_inlets
     assert np.all(seen[k:] == 1) and np.all(seen[:k] == 0)
-    cxyz = np.clip(np.floor((state.position - model.cell_lo) / model.cell_size).astype(int), 0,
-                   model.cell_shape - 1)
+    cxyz = np.clip(np.floor((state.position - model.cell_lo) / model.cell_size).astype(int), 0, model.cell_shape - 1)
     expected = (cxyz[:, 2] * model.cell_shape[1] + cxyz[:, 1]) * model.cell_shape[0] + cxyz[:, 0]
     np.testing.assert_array_equal(state.cell_of[k:], expected[k:])
 
 
-@pytest.mark.parametrize("overrides", [
-    ("tissue=plane2d",),
-    ("tissue=sphere", "n_terminals=120"),
-    ("tissue=heart", "n_terminals=120"),
-], ids=["plane2d", "sphere", "heart"])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ("tissue=plane2d",),
+        ("tissue=sphere", "n_terminals=120"),
+        ("tissue=heart", "n_terminals=120"),
+    ],
+    ids=["plane2d", "sphere", "heart"],
+)
 def test_fast_running_sums_equal_full_recomputation_and_cells_follow_the_nodes(overrides):
     steps = 1_000_000
     problem = make_problem(*overrides, "anneal=fast", f"anneal.steps={steps}")
@@ -92,13 +94,14 @@ def test_calibrated_temperatures_follow_the_cost_scale_and_leave_the_random_stre
     walker = engine.restore_state(problem, engine.state_arrays(state))
     walker.rng[:] = engine.seed_state(99)
     uphill = np.empty(4000)
-    uphill = uphill[:kernel.sample_uphill(problem.model, walker, 4000, uphill)]
+    uphill = uphill[: kernel.sample_uphill(problem.model, walker, 4000, uphill)]
     assert uphill.size > 500
     assert np.mean(np.exp(-uphill / t_start)) == pytest.approx(a.accept_start, abs=0.05)
     assert t_start > 1e3 * t_end
     # Configured temperatures are kept as they are.
-    kept = engine.initial_state(make_problem("tissue=plane2d", "anneal=fast", "anneal.T_start=1e-3",
-                                             "anneal.T_end=1e-10"), seed=4)
+    kept = engine.initial_state(
+        make_problem("tissue=plane2d", "anneal=fast", "anneal.T_start=1e-3", "anneal.T_end=1e-10"), seed=4
+    )
     np.testing.assert_array_equal(kept.schedule, [1e-3, 1e-10])
 
 
@@ -125,7 +128,7 @@ def test_supply_weight_follows_its_schedule_then_is_the_true_weight():
     model = problem.model
     state = engine.initial_state(problem, seed=0)
     rho = problem.physics.supply_radius / problem.tissue.voxel_size
-    assert model.supply_T_start == pytest.approx(problem.config.anneal.supply_T_start * math.pi * rho ** 2)
+    assert model.supply_T_start == pytest.approx(problem.config.anneal.supply_T_start * math.pi * rho**2)
     assert model.supply_steps == 500_000
     temp = 1e-6
     assert kernel.supply_weight(model, state, temp) == pytest.approx(temp / model.supply_T_start)
@@ -152,8 +155,9 @@ def test_fast_is_deterministic_across_block_splits_and_checkpoint_round_trips():
 
 
 def test_fast_steps_are_exact_and_polish_keeps_the_running_costs_true():
-    cfg = config.compose(["tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=200000",
-                          "anneal.trace_every=50000"])
+    cfg = config.compose(
+        ["tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=200000", "anneal.trace_every=50000"]
+    )
     result = engine.run(cfg, seed=1)
     assert result.steps == 200_000
     check_tree(result.tree, result.problem.tissue)
@@ -166,8 +170,16 @@ def test_fast_steps_are_exact_and_polish_keeps_the_running_costs_true():
 
 
 def test_the_job_stores_how_the_schedule_ran(tmp_path):
-    cfg = config.compose(["tissue=plane2d", "n_terminals=12", "anneal=fast", "anneal.steps=50000",
-                          "anneal.trace_every=10000", f"output_dir={tmp_path}"])
+    cfg = config.compose(
+        [
+            "tissue=plane2d",
+            "n_terminals=12",
+            "anneal=fast",
+            "anneal.steps=50000",
+            "anneal.trace_every=10000",
+            f"output_dir={tmp_path}",
+        ]
+    )
     (j,) = sweep.expand(cfg)
     summary = job.run_job(j)
     attrs = RunStore.open(j.store, mode="r").attrs
@@ -175,20 +187,24 @@ def test_the_job_stores_how_the_schedule_ran(tmp_path):
     problem = engine.build_problem(j.config)  # the calibrated schedule the run used, stored as run
     assert (report["T_start"], report["T_end"]) == tuple(engine.initial_state(problem, 0).schedule)
     assert report["polish"]["total_after"] <= report["polish"]["total_before"] + 1e-12 * abs(
-        report["polish"]["total_before"])
+        report["polish"]["total_before"]
+    )
     assert summary["cost"] == pytest.approx(summary["cost_recomputed"], rel=1e-9)
 
 
-@pytest.mark.parametrize("override, field", [
-    ("anneal.accept_start=1.5", "anneal.accept_start"),
-    ("anneal.acceptance_target=0", "anneal.acceptance_target"),
-    ("anneal.p_local=-0.1", "anneal.p_local"),
-    ("anneal.neighbour_cell=0", "anneal.neighbour_cell"),
-    ("anneal.adapt_window=0", "anneal.adapt_window"),
-    ("anneal.supply_T_end=10", "anneal.supply_T_end"),
-    ("anneal.supply_phase=0", "anneal.supply_phase"),
-    ("anneal.T_end_rel=-1", "anneal.T_end_rel"),
-])
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("anneal.accept_start=1.5", "anneal.accept_start"),
+        ("anneal.acceptance_target=0", "anneal.acceptance_target"),
+        ("anneal.p_local=-0.1", "anneal.p_local"),
+        ("anneal.neighbour_cell=0", "anneal.neighbour_cell"),
+        ("anneal.adapt_window=0", "anneal.adapt_window"),
+        ("anneal.supply_T_end=10", "anneal.supply_T_end"),
+        ("anneal.supply_phase=0", "anneal.supply_phase"),
+        ("anneal.T_end_rel=-1", "anneal.T_end_rel"),
+    ],
+)
 def test_bad_fast_settings_name_the_field(override, field):
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
         config.compose(["anneal=fast", override])
@@ -205,8 +221,14 @@ def _fixed_sites(tmp_path, n, seed):
 @pytest.mark.parametrize("n", [4, 5, pytest.param(6, marks=pytest.mark.slow)])
 def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
     path, sites = _fixed_sites(tmp_path, n, seed=n)
-    overrides = ["tissue=plane2d", f"n_terminals={n}", f"terminals.path={path}", "terminals.fixed=true",
-                 "anneal=fast", "anneal.steps=1000000"]
+    overrides = [
+        "tissue=plane2d",
+        f"n_terminals={n}",
+        f"terminals.path={path}",
+        "terminals.fixed=true",
+        "anneal=fast",
+        "anneal.steps=1000000",
+    ]
     problem = make_problem(*overrides)
     best, _, _ = geometry.best_topology(problem.tissue.inlets[0], sites, problem.physics, problem.tissue.bounds)
     for seed in range(4):

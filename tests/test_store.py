@@ -18,8 +18,14 @@ from vasc_pipeline import config, engine, job, store, sweep
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tree import Tree, check_tree
 
-TINY = ["tissue=plane2d", "n_terminals=12", "anneal.steps=60000", "anneal.trace_every=5000", "anneal.T_start=1e-2",
-        "anneal.T_end=1e-9"]
+TINY = [
+    "tissue=plane2d",
+    "n_terminals=12",
+    "anneal.steps=60000",
+    "anneal.trace_every=5000",
+    "anneal.T_start=1e-2",
+    "anneal.T_end=1e-9",
+]
 
 
 def tiny_job(tmp_path: Path, *extra: str) -> sweep.Job:
@@ -29,14 +35,19 @@ def tiny_job(tmp_path: Path, *extra: str) -> sweep.Job:
 
 def new_store(tmp_path: Path, name: str = "r") -> store.RunStore:
     cfg = {"n_terminals": 4, "seed": 3, "output_dir": "/x", "anneal": {"T_end": 1e-9}, "checkpoint": {"every": 1}}
-    return store.RunStore.create(tmp_path / f"{name}.zarr", run_id=name, seed=3, config=cfg,
-                                 coords={"seed": 3}, total_steps=100)
+    return store.RunStore.create(
+        tmp_path / f"{name}.zarr", run_id=name, seed=3, config=cfg, coords={"seed": 3}, total_steps=100
+    )
 
 
 def state_like(seed: int = 0) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
-    return {"parent": rng.integers(-1, 8, 8), "position": rng.random((8, 3)),
-            "rng": rng.integers(0, 2**63, 4, dtype=np.uint64), "supply": rng.integers(0, 3, (2, 3, 4), dtype=np.int32)}
+    return {
+        "parent": rng.integers(-1, 8, 8),
+        "position": rng.random((8, 3)),
+        "rng": rng.integers(0, 2**63, 4, dtype=np.uint64),
+        "supply": rng.integers(0, 3, (2, 3, 4), dtype=np.int32),
+    }
 
 
 class Crash(Exception):
@@ -50,6 +61,7 @@ def crash_after(blocks: int):
         seen.append(msg["step"])
         if len(seen) >= blocks:
             raise Crash(msg["step"])
+
     return report
 
 
@@ -174,8 +186,21 @@ def test_job_writes_the_documented_layout(tmp_path):
     a = s.attrs
     assert a["run_id"] == j.run_id == "plane2d-N12-mb641.3-s0" and a["seed"] == 0 and a["status"] == "complete"
     assert a["steps_done"] == 60000 and a["wall_seconds"] > 0 and a["config_hash"] == store.config_hash(j.config)
-    assert set(a["physics"]) >= {"n_terminals", "n_inlets", "gamma", "inlet_radius", "total_flow", "m_b", "viscosity",
-                                 "supply_radius", "r_cutoff", "A_wv", "A_o", "A_p", "A_s"}
+    assert set(a["physics"]) >= {
+        "n_terminals",
+        "n_inlets",
+        "gamma",
+        "inlet_radius",
+        "total_flow",
+        "m_b",
+        "viscosity",
+        "supply_radius",
+        "r_cutoff",
+        "A_wv",
+        "A_o",
+        "A_p",
+        "A_s",
+    }
     keys = {"total", "volume", "power", "supply", "exclusion", "pressure"}
     assert set(a["cost"]) == set(a["cost_recomputed"]) == keys
     for k in keys:
@@ -275,6 +300,8 @@ def test_identity_differences_allow_sweep_axes_and_a_second_method_only(tmp_path
     assert store.identity_differences(base, cfg("n_terminals=24", "seed=3", "physics.m_b=6413")) == []
     assert store.identity_differences(base, cfg("n_terminals=16", "method=cco")) == []  # the method comparison
     assert store.identity_differences(base, cfg("n_terminals=16", "anneal.p_swap=0.3")) == [
-        "anneal.p_swap: 0.5 (stored) vs 0.3 (requested)"]
+        "anneal.p_swap: 0.5 (stored) vs 0.3 (requested)"
+    ]
     assert store.identity_differences(base, cfg("method=cco", "physics.gamma=3.0")) == [
-        "physics.gamma: 2.1 (stored) vs 3.0 (requested)"]  # but nothing the two methods share
+        "physics.gamma: 2.1 (stored) vs 3.0 (requested)"
+    ]  # but nothing the two methods share

@@ -82,8 +82,9 @@ def test_convergence_is_the_papers_2d_test_at_several_step_counts():
 
 
 def test_command_line_overrides_beat_the_sweep_file():
-    cfg = config.compose(["+sweep=smoke", "tissue=plane2d", "sweep.seeds=[5]", "output_dir=runs/demo",
-                          "cluster.n_workers=2"])
+    cfg = config.compose(
+        ["+sweep=smoke", "tissue=plane2d", "sweep.seeds=[5]", "output_dir=runs/demo", "cluster.n_workers=2"]
+    )
     jobs = sweep.expand(cfg)
     assert {j.coords["tissue"] for j in jobs} == {"plane2d"} and {j.coords["seed"] for j in jobs} == {5}
     assert cfg.cluster.n_workers == 2 and cfg.output_dir == "runs/demo"
@@ -130,17 +131,20 @@ def test_no_sweep_is_one_job_of_the_base_config():
     assert j.run_id == "heart-N40-mb100-s7" and j.coords["steps"] is None
 
 
-@pytest.mark.parametrize("override, field", [
-    ("sweep.n_terminals=[16,1]", r"sweep\.n_terminals\[1\] must be an integer >= 2"),
-    ("sweep.m_b=[0.0]", r"sweep\.m_b\[0\] must be a finite number > 0"),
-    ("sweep.m_b=[-641.3]", r"sweep\.m_b\[0\] must be a finite number > 0"),
-    ("sweep.seeds=[-1]", r"sweep\.seeds\[0\] must be an integer in \[0"),
-    ("sweep.steps=[0]", r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
-    ("sweep.seeds=[1,1]", r"sweep\.seeds lists \[1\] more than once"),
-    ("sweep.m_b=[]", r"sweep\.m_b must be a non-empty list"),
-    ("anneal.steps=0", r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
-    ("physics.viscosity=0", r"physics\.viscosity must be a finite number > 0"),
-])
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("sweep.n_terminals=[16,1]", r"sweep\.n_terminals\[1\] must be an integer >= 2"),
+        ("sweep.m_b=[0.0]", r"sweep\.m_b\[0\] must be a finite number > 0"),
+        ("sweep.m_b=[-641.3]", r"sweep\.m_b\[0\] must be a finite number > 0"),
+        ("sweep.seeds=[-1]", r"sweep\.seeds\[0\] must be an integer in \[0"),
+        ("sweep.steps=[0]", r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
+        ("sweep.seeds=[1,1]", r"sweep\.seeds lists \[1\] more than once"),
+        ("sweep.m_b=[]", r"sweep\.m_b must be a non-empty list"),
+        ("anneal.steps=0", r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
+        ("physics.viscosity=0", r"physics\.viscosity must be a finite number > 0"),
+    ],
+)
 def test_bad_grid_values_name_the_field(override, field):
     with pytest.raises(ConfigError, match=field):  # compose checks the base config, expand the grid
         sweep.expand(config.compose(["+sweep=smoke", override]))
@@ -148,8 +152,15 @@ def test_bad_grid_values_name_the_field(override, field):
 
 def test_job_config_paths_are_absolute(tmp_path):
     mask = tmp_path / "m.npy"
-    cfg = config.compose(["tissue=mask", "tissue.path=m.npy", "tissue.voxel_size=0.001",
-                          "tissue.inlets=[[0.0,0.0,0.0]]", "output_dir=rel/out"])
+    cfg = config.compose(
+        [
+            "tissue=mask",
+            "tissue.path=m.npy",
+            "tissue.voxel_size=0.001",
+            "tissue.inlets=[[0.0,0.0,0.0]]",
+            "output_dir=rel/out",
+        ]
+    )
     (j,) = sweep.expand(cfg)
     assert Path(j.config["tissue"]["path"]) == Path.cwd() / "m.npy" != mask
     assert Path(j.config["output_dir"]) == Path.cwd() / "rel" / "out"

@@ -11,15 +11,30 @@ import pytest
 import xarray as xr
 
 REPO = Path(__file__).resolve().parents[1]
-TINY = ["sweep.seeds=[0]", "anneal.steps=3000", "anneal.trace_every=1000", "cluster.n_workers=1",
-        "cluster.dashboard_address=null"]
+TINY = [
+    "sweep.seeds=[0]",
+    "anneal.steps=3000",
+    "anneal.trace_every=1000",
+    "cluster.n_workers=1",
+    "cluster.dashboard_address=null",
+]
 
 
 def study(script: str, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "RUNS_DIR": str(tmp_path / "runs"), "PAPER_DIR": str(tmp_path / "paper"),
-           "PYTHON": sys.executable}
-    return subprocess.run(["bash", str(REPO / "workflows" / script), *args], cwd=REPO, env=env, capture_output=True,
-                          text=True, timeout=600)
+    env = {
+        **os.environ,
+        "RUNS_DIR": str(tmp_path / "runs"),
+        "PAPER_DIR": str(tmp_path / "paper"),
+        "PYTHON": sys.executable,
+    }
+    return subprocess.run(
+        ["bash", str(REPO / "workflows" / script), *args],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def assert_collected(paper: Path, run_ids: list[str]) -> None:
@@ -40,15 +55,26 @@ def test_size_scan_runs_the_sweep_then_collects_its_small_outputs(tmp_path):
     assert again.returncode == 0 and "2 already complete, 0 failed" in again.stdout + again.stderr, again.stderr
 
 
-@pytest.mark.parametrize("script, expected", [
-    ("convergence.sh", {"convergence_paper": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],
-                        "convergence_fast": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"]}),
-    ("consistency.sh", {"consistency": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"]}),
-    ("mb_scan.sh", {"mb_scan": ["heart-N12-mb641.3-s0", "heart-N12-mb6413-s0"]}),
-])
+@pytest.mark.parametrize(
+    "script, expected",
+    [
+        (
+            "convergence.sh",
+            {
+                "convergence_paper": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],
+                "convergence_fast": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],
+            },
+        ),
+        ("consistency.sh", {"consistency": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"]}),
+        ("mb_scan.sh", {"mb_scan": ["heart-N12-mb641.3-s0", "heart-N12-mb6413-s0"]}),
+    ],
+)
 def test_each_study_script_wires_its_sweeps(tmp_path, script, expected):
-    extra = (["sweep.steps=[1000,3000]"] if script != "mb_scan.sh"
-             else ["sweep.n_terminals=[12]", "sweep.m_b=[641.3,6413.0]"])
+    extra = (
+        ["sweep.steps=[1000,3000]"]
+        if script != "mb_scan.sh"
+        else ["sweep.n_terminals=[12]", "sweep.m_b=[641.3,6413.0]"]
+    )
     done = study(script, tmp_path, "local", *TINY, *extra)
     assert done.returncode == 0, done.stdout + done.stderr
     for name, run_ids in expected.items():
@@ -57,10 +83,16 @@ def test_each_study_script_wires_its_sweeps(tmp_path, script, expected):
 
 def test_cluster_argument():
     common = REPO / "workflows" / "_common.sh"
-    for arg, expected in [("local", "cluster=local"), ("slurm", "cluster=slurm"),
-                          ("tls://10.0.0.1:8786", "cluster=address cluster.address=tls://10.0.0.1:8786")]:
-        out = subprocess.run(["bash", "-c", f'source "{common}" {arg} x=1; echo "$CLUSTER_ARGS|${{EXTRA[*]}}"'],
-                             capture_output=True, text=True)
+    for arg, expected in [
+        ("local", "cluster=local"),
+        ("slurm", "cluster=slurm"),
+        ("tls://10.0.0.1:8786", "cluster=address cluster.address=tls://10.0.0.1:8786"),
+    ]:
+        out = subprocess.run(
+            ["bash", "-c", f'source "{common}" {arg} x=1; echo "$CLUSTER_ARGS|${{EXTRA[*]}}"'],
+            capture_output=True,
+            text=True,
+        )
         assert out.stdout.strip() == f"{expected}|x=1", out.stderr
     bad = subprocess.run(["bash", "-c", f'source "{common}" lcoal'], capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown cluster 'lcoal' (accepted: local, slurm" in bad.stderr

@@ -37,8 +37,10 @@ def _check_overrides(args: list[str]) -> None:
     try:
         config.compose(args, check=False)
     except config.ConfigError as exc:
-        sys.stderr.write(f"vasc_pipeline: error: {exc}\nNothing was run; existing results were left as they "
-                         "were. python -m vasc_pipeline --help lists the config groups and keys.\n")
+        sys.stderr.write(
+            f"vasc_pipeline: error: {exc}\nNothing was run; existing results were left as they "
+            "were. python -m vasc_pipeline --help lists the config groups and keys.\n"
+        )
         sys.exit(2)
 
 

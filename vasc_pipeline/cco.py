@@ -197,9 +197,11 @@ def fermat_point(p, q, r, wp, wq, wr, out):
         hess[1, 0], hess[2, 0], hess[2, 1] = hess[0, 1], hess[0, 2], hess[1, 2]
         if _norm3(grad[0], grad[1], grad[2]) <= 1e-13 * total:
             break
-        det = (hess[0, 0] * (hess[1, 1] * hess[2, 2] - hess[1, 2] * hess[2, 1])
-               - hess[0, 1] * (hess[1, 0] * hess[2, 2] - hess[1, 2] * hess[2, 0])
-               + hess[0, 2] * (hess[1, 0] * hess[2, 1] - hess[1, 1] * hess[2, 0]))
+        det = (
+            hess[0, 0] * (hess[1, 1] * hess[2, 2] - hess[1, 2] * hess[2, 1])
+            - hess[0, 1] * (hess[1, 0] * hess[2, 2] - hess[1, 2] * hess[2, 0])
+            + hess[0, 2] * (hess[1, 0] * hess[2, 1] - hess[1, 1] * hess[2, 0])
+        )
         if not abs(det) > 0.0:
             break
         step = np.linalg.solve(hess, grad)
@@ -289,9 +291,33 @@ def _draw_site(rng, voxels, shape, origin, voxel_size, planar, out):
 
 
 @jit
-def _grow(parent, children, position, n_down, seg_length, costs, compensation, rng, w_vol, w_pow, sites,
-          random_sites, voxels, shape, origin, voxel_size, planar, measure, ndim, n_candidates, max_tries, shrink,
-          factor, trace, first):
+def _grow(
+    parent,
+    children,
+    position,
+    n_down,
+    seg_length,
+    costs,
+    compensation,
+    rng,
+    w_vol,
+    w_pow,
+    sites,
+    random_sites,
+    voxels,
+    shape,
+    origin,
+    voxel_size,
+    planar,
+    measure,
+    ndim,
+    n_candidates,
+    max_tries,
+    shrink,
+    factor,
+    trace,
+    first,
+):
     """Add terminals ``first`` .. N - 1 (in place). Returns (sites drawn, final distance factor).
 
     Node layout: inlets [0, K), terminal i at K + i, the bifurcation made by terminal i at
@@ -370,8 +396,9 @@ def _grow(parent, children, position, n_down, seg_length, costs, compensation, r
             n_down[a] += 1
             a = parent[a]
         seg_length[b] = _norm3(best_bif[0] - position[p, 0], best_bif[1] - position[p, 1], best_bif[2] - position[p, 2])
-        seg_length[best] = _norm3(best_bif[0] - position[best, 0], best_bif[1] - position[best, 1],
-                                  best_bif[2] - position[best, 2])
+        seg_length[best] = _norm3(
+            best_bif[0] - position[best, 0], best_bif[1] - position[best, 1], best_bif[2] - position[best, 2]
+        )
         seg_length[t] = _norm3(best_bif[0] - site[0], best_bif[1] - site[1], best_bif[2] - site[2])
         _add(costs, compensation, 0, best_vol)
         _add(costs, compensation, 1, best_pow)
@@ -421,8 +448,10 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
     sites = _site_order(problem, rng)
     first = random_terminal_sites(tissue, k, rng) if sites is None else sites[:k]
     # The first K terminals go straight to the inlets, by the cheapest assignment.
-    best = min(itertools.permutations(range(k)),
-               key=lambda perm: sum(np.linalg.norm(first[perm[j]] - tissue.inlets[j]) for j in range(k)))
+    best = min(
+        itertools.permutations(range(k)),
+        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - tissue.inlets[j]) for j in range(k)),
+    )
     costs, compensation = np.zeros(2), np.zeros(2)
     trace = np.zeros((n, 3))
     for j in range(k):
@@ -437,11 +466,32 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
     voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
     drawn, factor = _grow(
-        parent, children, position, n_down, seg_length, costs, compensation, rng, w_vol, w_pow,
-        sites if sites is not None else np.zeros((0, 3)), sites is None, voxels,
-        np.array(tissue.shape, dtype=np.int64), np.ascontiguousarray(tissue.origin, dtype=np.float64),
-        float(tissue.voxel_size), tissue.ndim == 2, float(tissue.measure), int(tissue.ndim),
-        int(method.candidates), int(method.max_tries), float(method.shrink), 1.0, trace, k)
+        parent,
+        children,
+        position,
+        n_down,
+        seg_length,
+        costs,
+        compensation,
+        rng,
+        w_vol,
+        w_pow,
+        sites if sites is not None else np.zeros((0, 3)),
+        sites is None,
+        voxels,
+        np.array(tissue.shape, dtype=np.int64),
+        np.ascontiguousarray(tissue.origin, dtype=np.float64),
+        float(tissue.voxel_size),
+        tissue.ndim == 2,
+        float(tissue.measure),
+        int(tissue.ndim),
+        int(method.candidates),
+        int(method.max_tries),
+        float(method.shrink),
+        1.0,
+        trace,
+        k,
+    )
     tree = Tree(parent, children, position, n_down, k)
     return tree, trace, int(drawn) + k, float(factor)
 
@@ -468,12 +518,27 @@ def grow(problem, seed: int | None = None, rng: np.ndarray | None = None) -> CCO
     costs["volume"], costs["power"] = float(rows[-1, 0]), float(rows[-1, 1])  # the growth's running sums
     costs["total"] = total_cost(costs, problem.physics)
     k = problem.physics.n_inlets
-    steps = np.arange(1, tree.n_terminals + 1, dtype=np.int64)[k - 1:]
-    body = rows[k - 1:]
+    steps = np.arange(1, tree.n_terminals + 1, dtype=np.int64)[k - 1 :]
+    body = rows[k - 1 :]
     zeros = np.zeros(body.shape[0])
-    trace = {"step": steps, "temperature": np.full(body.shape[0], np.nan), "volume": body[:, 0].copy(),
-             "power": body[:, 1].copy(), "supply": zeros.copy(), "exclusion": zeros.copy(),
-             "pressure": zeros.copy(), "total": body[:, 0] + body[:, 1], "acceptance": 1.0 / body[:, 2]}
+    trace = {
+        "step": steps,
+        "temperature": np.full(body.shape[0], np.nan),
+        "volume": body[:, 0].copy(),
+        "power": body[:, 1].copy(),
+        "supply": zeros.copy(),
+        "exclusion": zeros.copy(),
+        "pressure": zeros.copy(),
+        "total": body[:, 0] + body[:, 1],
+        "acceptance": 1.0 / body[:, 2],
+    }
     trace["acceptance"][0] = 1.0
-    return CCOResult(tree=tree, costs=costs, costs_recomputed=recomputed, trace=trace, tries=drawn,
-                     distance_factor=factor, wall_seconds=time.perf_counter() - start)
+    return CCOResult(
+        tree=tree,
+        costs=costs,
+        costs_recomputed=recomputed,
+        trace=trace,
+        tries=drawn,
+        distance_factor=factor,
+        wall_seconds=time.perf_counter() - start,
+    )

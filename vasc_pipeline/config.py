@@ -14,11 +14,28 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-__all__ = ["ConfigError", "KEYS_ADDED_LATER", "TissueConfig", "PhysicsConfig", "AnnealConfig", "TerminalsConfig", "CheckpointConfig",
-           "MethodConfig", "METHODS",
-           "RunConfig", "SweepConfig", "ClusterConfig", "TLSConfig", "SlurmConfig", "to_run_config", "validate",
-           "scheduled_steps", "packing_steps",
-           "compose", "CONFIG_DIR"]
+__all__ = [
+    "ConfigError",
+    "KEYS_ADDED_LATER",
+    "TissueConfig",
+    "PhysicsConfig",
+    "AnnealConfig",
+    "TerminalsConfig",
+    "CheckpointConfig",
+    "MethodConfig",
+    "METHODS",
+    "RunConfig",
+    "SweepConfig",
+    "ClusterConfig",
+    "TLSConfig",
+    "SlurmConfig",
+    "to_run_config",
+    "validate",
+    "scheduled_steps",
+    "packing_steps",
+    "compose",
+    "CONFIG_DIR",
+]
 
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
 _PACKAGE_DIR = Path(__file__).resolve().parent
@@ -59,16 +76,16 @@ class ConfigError(ValueError):
 @dataclass
 class TissueConfig:
     name: str = "heart"
-    voxel_size: Optional[float] = None   # m; None: R_supply / 4 (SPEC section 3)
-    q_required: Optional[float] = None   # s^-1; None: the N supply spheres fill the tissue
-    radius: float = 0.02                 # sphere radius, m
+    voxel_size: Optional[float] = None  # m; None: R_supply / 4 (SPEC section 3)
+    q_required: Optional[float] = None  # s^-1; None: the N supply spheres fill the tissue
+    radius: float = 0.02  # sphere radius, m
     size: list[float] = field(default_factory=lambda: [0.04, 0.04, 0.02])  # box edges [x, y, z], m
-    side: float = 0.1                    # plane2d square side, m
-    mass_g: float = 218.0                # heart: myocardial mass, g
-    density: float = 1.06e3              # heart: myocardial density, kg m^-3
-    exclude_cavities: bool = True        # heart: large vessels also kept out of the ventricular cavities
-    path: Optional[str] = None           # mask: .npy file or Zarr array
-    array: Optional[str] = None          # mask: array name inside a Zarr group
+    side: float = 0.1  # plane2d square side, m
+    mass_g: float = 218.0  # heart: myocardial mass, g
+    density: float = 1.06e3  # heart: myocardial density, kg m^-3
+    exclude_cavities: bool = True  # heart: large vessels also kept out of the ventricular cavities
+    path: Optional[str] = None  # mask: .npy file or Zarr array
+    array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
     inlets: Optional[list[list[float]]] = None  # mask: inlet positions, m
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
@@ -77,18 +94,18 @@ class TissueConfig:
 
 @dataclass
 class PhysicsConfig:
-    gamma: float = 2.1                   # bifurcation exponent
-    inlet_radius: float = 2.1e-3         # combined inlet radius r_in, m
-    total_flow: float = 4.16e-6          # Q0, m^3 s^-1
-    m_b: float = 641.3                   # W m^-3
-    viscosity: float = 3.6e-3            # Pa s
-    r_cutoff: float = 1e-5               # m
+    gamma: float = 2.1  # bifurcation exponent
+    inlet_radius: float = 2.1e-3  # combined inlet radius r_in, m
+    total_flow: float = 4.16e-6  # Q0, m^3 s^-1
+    m_b: float = 641.3  # W m^-3
+    viscosity: float = 3.6e-3  # Pa s
+    r_cutoff: float = 1e-5  # m
     A_wv: float = 1e4
     A_o: float = 100.0
     A_p: float = 0.0
     A_s: float = 1e30
-    pressure_inlet: float = 13.3e3       # Pa (100 mmHg)
-    pressure_terminal: float = 12.0e3    # Pa
+    pressure_inlet: float = 13.3e3  # Pa (100 mmHg)
+    pressure_terminal: float = 12.0e3  # Pa
 
 
 @dataclass
@@ -96,40 +113,40 @@ class AnnealConfig:
     """The schedule and moves. ``anneal=paper`` and ``anneal=fast`` (conf/anneal/) are presets."""
 
     name: str = "paper"
-    T_start: Optional[float] = 1e10      # W; None: calibrated so uphill moves start accept_start accepted
-    T_end: Optional[float] = 1e-5        # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
-    accept_start: float = 0.8            # mean acceptance of uphill moves at a calibrated T_start
-    T_end_rel: float = 1e-4              # calibrated T_end relative to w(1) R_supply
-    calibration_samples: int = 4000      # infinite-temperature moves measured for T_start
-    steps: Optional[int] = None          # proposed moves; None: steps_at_1000 * (N / 1000)^steps_exponent
+    T_start: Optional[float] = 1e10  # W; None: calibrated so uphill moves start accept_start accepted
+    T_end: Optional[float] = 1e-5  # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
+    accept_start: float = 0.8  # mean acceptance of uphill moves at a calibrated T_start
+    T_end_rel: float = 1e-4  # calibrated T_end relative to w(1) R_supply
+    calibration_samples: int = 4000  # infinite-temperature moves measured for T_start
+    steps: Optional[int] = None  # proposed moves; None: steps_at_1000 * (N / 1000)^steps_exponent
     steps_at_1000: float = PAPER_STEPS_AT_1000
-    steps_exponent: float = 2.0          # budget law in N (the paper's guess: 2)
+    steps_exponent: float = 2.0  # budget law in N (the paper's guess: 2)
     packing_steps_per_terminal: float = 0.0  # packing phase (supply alone, terminals only) before the tree
-                                         # anneal, in proposals per terminal, part of the steps; 0: none
-    packing_T_start: float = 1.0         # its temperature at the start, in voxels of one supply sphere
-    packing_T_end: float = 0.05          # ... and at its end, in C_s units
-    p_swap: float = 0.5                  # probability that a proposal is a swap
-    p_local: float = 0.0                 # probability that a swap partner is a spatial neighbour (else uniform)
-    neighbour_cell: float = 1.0          # edge of the neighbour cells, in R_supply
-    step_terminal: float = 0.5           # translation half-width for terminals, in R_supply (the cap when adapted)
-    step_bifurcation: float = 1.0        # translation half-width for bifurcations, in R_supply (the cap when adapted)
+    # anneal, in proposals per terminal, part of the steps; 0: none
+    packing_T_start: float = 1.0  # its temperature at the start, in voxels of one supply sphere
+    packing_T_end: float = 0.05  # ... and at its end, in C_s units
+    p_swap: float = 0.5  # probability that a proposal is a swap
+    p_local: float = 0.0  # probability that a swap partner is a spatial neighbour (else uniform)
+    neighbour_cell: float = 1.0  # edge of the neighbour cells, in R_supply
+    step_terminal: float = 0.5  # translation half-width for terminals, in R_supply (the cap when adapted)
+    step_bifurcation: float = 1.0  # translation half-width for bifurcations, in R_supply (the cap when adapted)
     supply_T_start: Optional[float] = None  # supply's own temperature at step 0, in units of the voxels of one
-                                         # supply sphere; None: supply is searched downhill throughout (the paper)
-    supply_T_end: float = 0.05           # ... at the end of its phase, in C_s units (0.05: +1 accepted at e^-20)
-    supply_phase: float = 0.5            # fraction of the steps the supply schedule runs; then the true weight
-    adapt_steps: bool = False            # adapt half-widths to keep acceptance near acceptance_target
-    acceptance_target: float = 0.3       # per node class (terminal, bifurcation)
-    adapt_window: int = 1000             # proposals of a class between adaptations
-    polish: bool = False                 # optimise the final topology's bifurcation positions (geometry.polish)
+    # supply sphere; None: supply is searched downhill throughout (the paper)
+    supply_T_end: float = 0.05  # ... at the end of its phase, in C_s units (0.05: +1 accepted at e^-20)
+    supply_phase: float = 0.5  # fraction of the steps the supply schedule runs; then the true weight
+    adapt_steps: bool = False  # adapt half-widths to keep acceptance near acceptance_target
+    acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
+    adapt_window: int = 1000  # proposals of a class between adaptations
+    polish: bool = False  # optimise the final topology's bifurcation positions (geometry.polish)
     polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (geometry.descend_swaps)
-    trace_every: int = 100_000           # steps between trace records
-    init: str = "random"                 # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.cco, method.* settings)
+    trace_every: int = 100_000  # steps between trace records
+    init: str = "random"  # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.cco, method.* settings)
 
 
 @dataclass
 class TerminalsConfig:
-    path: Optional[str] = None           # CSV of x, y, z (m)
-    fixed: bool = False                  # fixed sites never move; the supply term is off
+    path: Optional[str] = None  # CSV of x, y, z (m)
+    fixed: bool = False  # fixed sites never move; the supply term is off
 
 
 @dataclass
@@ -137,10 +154,10 @@ class MethodConfig:
     """How the tree is grown: ``method=anneal`` (default) or ``method=cco`` (conf/method/)."""
 
     name: str = "anneal"
-    candidates: int = 20                 # cco: nearest segments evaluated for each new terminal
-    max_tries: int = 10                  # cco: rejected sites before the distance criterion shrinks
-    shrink: float = 0.9                  # cco: factor of that shrink
-    order: str = "file"                  # cco with terminals.path: "file" order or a seeded "random" order
+    candidates: int = 20  # cco: nearest segments evaluated for each new terminal
+    max_tries: int = 10  # cco: rejected sites before the distance criterion shrinks
+    shrink: float = 0.9  # cco: factor of that shrink
+    order: str = "file"  # cco with terminals.path: "file" order or a seeded "random" order
 
 
 @dataclass
@@ -264,41 +281,52 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive("anneal.supply_T_start", a.supply_T_start)
         _positive("anneal.supply_T_end", a.supply_T_end)
         if a.supply_T_end >= a.supply_T_start:
-            raise ConfigError(f"anneal.supply_T_end must be < anneal.supply_T_start, got {a.supply_T_end} >= "
-                              f"{a.supply_T_start}")
+            raise ConfigError(
+                f"anneal.supply_T_end must be < anneal.supply_T_start, got {a.supply_T_end} >= {a.supply_T_start}"
+            )
     if not 0.0 < a.supply_phase <= 1.0:
         raise ConfigError(f"anneal.supply_phase must lie in (0, 1], got {a.supply_phase}")
     _positive("anneal.neighbour_cell", a.neighbour_cell)
     if not isinstance(a.polish_swaps_max_terminals, int) or a.polish_swaps_max_terminals < 0:
-        raise ConfigError(f"anneal.polish_swaps_max_terminals must be an integer >= 0, got {a.polish_swaps_max_terminals}")
+        raise ConfigError(
+            f"anneal.polish_swaps_max_terminals must be an integer >= 0, got {a.polish_swaps_max_terminals}"
+        )
     for name in ("calibration_samples", "adapt_window"):
         if not isinstance(getattr(a, name), int) or getattr(a, name) < 1:
             raise ConfigError(f"anneal.{name} must be an integer >= 1, got {getattr(a, name)}")
     if not 0.0 <= a.p_local <= 1.0:
         raise ConfigError(f"anneal.p_local must lie in [0, 1], got {a.p_local}")
     if a.steps is not None and (not isinstance(a.steps, int) or not 1 <= a.steps <= MAX_STEPS):
-        raise ConfigError(f"anneal.steps must be an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run), "
-                          f"got {a.steps}")
+        raise ConfigError(
+            f"anneal.steps must be an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run), got {a.steps}"
+        )
     _positive("anneal.steps_at_1000", a.steps_at_1000)
     if a.steps is None and scheduled_steps(cfg) > MAX_STEPS:
-        raise ConfigError(f"anneal.steps_at_1000={a.steps_at_1000:g} schedules {scheduled_steps(cfg):.3g} proposed "
-                          f"moves at n_terminals={cfg.n_terminals}, more than {MAX_STEPS:.0e}; lower it or set "
-                          "anneal.steps")
+        raise ConfigError(
+            f"anneal.steps_at_1000={a.steps_at_1000:g} schedules {scheduled_steps(cfg):.3g} proposed "
+            f"moves at n_terminals={cfg.n_terminals}, more than {MAX_STEPS:.0e}; lower it or set "
+            "anneal.steps"
+        )
     if not (0.0 <= a.steps_exponent <= 4.0):
         raise ConfigError(f"anneal.steps_exponent must lie in [0, 4], got {a.steps_exponent}")
     if not (0.0 <= a.packing_steps_per_terminal < math.inf):
-        raise ConfigError(f"anneal.packing_steps_per_terminal must be a finite number >= 0, got "
-                          f"{a.packing_steps_per_terminal}")
+        raise ConfigError(
+            f"anneal.packing_steps_per_terminal must be a finite number >= 0, got {a.packing_steps_per_terminal}"
+        )
     if a.packing_steps_per_terminal > 0:
         _positive("anneal.packing_T_start", a.packing_T_start)
         _positive("anneal.packing_T_end", a.packing_T_end)
         if cfg.terminals.fixed:
-            raise ConfigError("anneal.packing_steps_per_terminal must be 0 with terminals.fixed=true (the packing "
-                              "phase moves terminals)")
+            raise ConfigError(
+                "anneal.packing_steps_per_terminal must be 0 with terminals.fixed=true (the packing "
+                "phase moves terminals)"
+            )
         if packing_steps(cfg) >= scheduled_steps(cfg):
-            raise ConfigError(f"anneal.packing_steps_per_terminal={a.packing_steps_per_terminal:g} gives "
-                              f"{packing_steps(cfg)} packing proposals, but the run has only {scheduled_steps(cfg)} "
-                              "(anneal.steps): leave room for the tree anneal")
+            raise ConfigError(
+                f"anneal.packing_steps_per_terminal={a.packing_steps_per_terminal:g} gives "
+                f"{packing_steps(cfg)} packing proposals, but the run has only {scheduled_steps(cfg)} "
+                "(anneal.steps): leave room for the tree anneal"
+            )
     if not 0.0 <= a.p_swap <= 1.0:
         raise ConfigError(f"anneal.p_swap must lie in [0, 1], got {a.p_swap}")
     _positive("anneal.step_terminal", a.step_terminal)
@@ -311,8 +339,10 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive("tissue.q_required", cfg.tissue.q_required)
     _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)
     if cfg.checkpoint.every_seconds > MAX_CHECKPOINT_SECONDS:
-        raise ConfigError(f"checkpoint.every_seconds must be <= {MAX_CHECKPOINT_SECONDS:g} (a week), got "
-                          f"{cfg.checkpoint.every_seconds}")
+        raise ConfigError(
+            f"checkpoint.every_seconds must be <= {MAX_CHECKPOINT_SECONDS:g} (a week), got "
+            f"{cfg.checkpoint.every_seconds}"
+        )
     if cfg.stage not in STAGES:
         raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
     _validate_method(cfg)
@@ -343,8 +373,7 @@ def register_schema() -> None:
     ConfigStore.instance().store(name="base_config", node=RunConfig)
 
 
-def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config",
-            check: bool = True) -> RunConfig:
+def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config", check: bool = True) -> RunConfig:
     """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
 
     A Hydra-level error (unknown key or group option, wrong type, unparsable override) is a
@@ -395,8 +424,9 @@ def hydra_error_message(exc: BaseException) -> str:
         if kind in ("ConfigAttributeError", "ConfigKeyError"):
             accepted = _schema_keys(parts[:-1])
             where = ".".join(parts[:-1]) or "the top level"
-            return (f"unknown config key {key!r}" + (f"; accepted keys at {where}: {', '.join(accepted)}"
-                                                      if accepted else ""))
+            return f"unknown config key {key!r}" + (
+                f"; accepted keys at {where}: {', '.join(accepted)}" if accepted else ""
+            )
         first = str(cause).splitlines()[0]
         return f"{key}: {first}"
     return text.replace("\n", " ")
@@ -414,36 +444,36 @@ class SweepConfig:
     """
 
     name: str = "single"
-    n_terminals: Optional[list[int]] = None   # N axis; None: [n_terminals]
-    m_b: Optional[list[float]] = None         # W m^-3 axis; None: [physics.m_b]
-    seeds: Optional[list[int]] = None         # None: [seed]
-    steps: Optional[list[int]] = None         # proposed moves axis; None: anneal.steps (or the schedule's)
+    n_terminals: Optional[list[int]] = None  # N axis; None: [n_terminals]
+    m_b: Optional[list[float]] = None  # W m^-3 axis; None: [physics.m_b]
+    seeds: Optional[list[int]] = None  # None: [seed]
+    steps: Optional[list[int]] = None  # proposed moves axis; None: anneal.steps (or the schedule's)
 
 
 @dataclass
 class TLSConfig:
     """Dask TLS settings (distributed.security.Security) for cluster=address / cluster=slurm."""
 
-    ca_file: Optional[str] = None             # PEM file of the certificate authority
-    cert: Optional[str] = None                # PEM client/worker certificate
-    key: Optional[str] = None                 # PEM private key (None: inside cert)
-    require_encryption: bool = False          # refuse unencrypted connections
+    ca_file: Optional[str] = None  # PEM file of the certificate authority
+    cert: Optional[str] = None  # PEM client/worker certificate
+    key: Optional[str] = None  # PEM private key (None: inside cert)
+    require_encryption: bool = False  # refuse unencrypted connections
 
 
 @dataclass
 class SlurmConfig:
     """dask-jobqueue SLURMCluster options: one single-threaded worker per SLURM task slot."""
 
-    queue: Optional[str] = None               # partition (-p)
-    account: Optional[str] = None             # -A
-    walltime: str = "04:00:00"                # per SLURM job; runs resume across jobs
-    cores: int = 1                            # worker processes (one thread each) per SLURM job
-    memory: str = "4GB"                       # per SLURM job
-    interface: Optional[str] = None           # network interface of the workers, e.g. ib0
-    local_directory: Optional[str] = None     # node-local scratch for Dask
-    log_directory: Optional[str] = None       # where SLURM writes the job logs
-    job_extra_directives: list[str] = field(default_factory=list)   # extra '#SBATCH ...' lines
-    job_script_prologue: list[str] = field(default_factory=list)    # e.g. module load / conda activate
+    queue: Optional[str] = None  # partition (-p)
+    account: Optional[str] = None  # -A
+    walltime: str = "04:00:00"  # per SLURM job; runs resume across jobs
+    cores: int = 1  # worker processes (one thread each) per SLURM job
+    memory: str = "4GB"  # per SLURM job
+    interface: Optional[str] = None  # network interface of the workers, e.g. ib0
+    local_directory: Optional[str] = None  # node-local scratch for Dask
+    log_directory: Optional[str] = None  # where SLURM writes the job logs
+    job_extra_directives: list[str] = field(default_factory=list)  # extra '#SBATCH ...' lines
+    job_script_prologue: list[str] = field(default_factory=list)  # e.g. module load / conda activate
 
 
 @dataclass
@@ -451,14 +481,12 @@ class ClusterConfig:
     """Where the jobs run: ``local`` (LocalCluster), ``address`` (existing scheduler) or ``slurm``."""
 
     name: str = "local"
-    n_workers: Optional[int] = None           # local: None = cores (at most one per job); slurm: workers to request
-    address: Optional[str] = None             # tcp://host:8786 or tls://host:8786 of an existing scheduler
+    n_workers: Optional[int] = None  # local: None = cores (at most one per job); slurm: workers to request
+    address: Optional[str] = None  # tcp://host:8786 or tls://host:8786 of an existing scheduler
     dashboard_address: Optional[str] = "127.0.0.1:8787"  # local/slurm dashboard; None: no dashboard
-    retries: int = 2                          # resubmissions of a job whose worker died or that raised
-    startup_timeout: float = 300.0            # s to wait for the first worker (and for the first job to start)
-    allow_insecure: bool = False              # slurm without cluster.tls files: plain tcp instead of temporary TLS
-    dry_run: bool = False                     # print the planned runs (and the SLURM job script); run nothing
+    retries: int = 2  # resubmissions of a job whose worker died or that raised
+    startup_timeout: float = 300.0  # s to wait for the first worker (and for the first job to start)
+    allow_insecure: bool = False  # slurm without cluster.tls files: plain tcp instead of temporary TLS
+    dry_run: bool = False  # print the planned runs (and the SLURM job script); run nothing
     tls: TLSConfig = field(default_factory=TLSConfig)
     slurm: SlurmConfig = field(default_factory=SlurmConfig)
-
-

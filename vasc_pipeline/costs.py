@@ -17,8 +17,21 @@ from .physics import Physics, cost_tables
 from .tissue import Tissue
 from .tree import Tree
 
-__all__ = ["COST_TERMS", "ActiveTerms", "active_terms", "segment_lengths", "voxel_pieces", "exclusion_sum",
-           "cavity_share", "LARGE_VESSEL_FRACTION", "supply_counts", "supply_cost", "node_pressures", "full_costs", "total_cost"]
+__all__ = [
+    "COST_TERMS",
+    "ActiveTerms",
+    "active_terms",
+    "segment_lengths",
+    "voxel_pieces",
+    "exclusion_sum",
+    "cavity_share",
+    "LARGE_VESSEL_FRACTION",
+    "supply_counts",
+    "supply_cost",
+    "node_pressures",
+    "full_costs",
+    "total_cost",
+]
 
 COST_TERMS = ("volume", "power", "supply", "exclusion", "pressure")
 
@@ -91,8 +104,13 @@ def exclusion_sum(p0: np.ndarray, p1: np.ndarray, tissue: Tissue) -> float:
 LARGE_VESSEL_FRACTION = 0.25
 
 
-def cavity_share(parent: np.ndarray, position: np.ndarray, radius: np.ndarray, tissue: Tissue,
-                 large_fraction: float = LARGE_VESSEL_FRACTION) -> float:
+def cavity_share(
+    parent: np.ndarray,
+    position: np.ndarray,
+    radius: np.ndarray,
+    tissue: Tissue,
+    large_fraction: float = LARGE_VESSEL_FRACTION,
+) -> float:
     """Share of the length of the large vessels that lies in the tissue's cavities.
 
     Cavities are the voxels of the exclusion domain outside the tissue (the heart's
@@ -156,7 +174,7 @@ def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = No
     drop = tables.flow[n] * tables.resistance[n] * lengths
     pressure = np.zeros(tree.n_nodes)
     queue = deque(range(tree.n_inlets))
-    pressure[:tree.n_inlets] = physics.pressure_inlet
+    pressure[: tree.n_inlets] = physics.pressure_inlet
     while queue:
         node = queue.popleft()
         for child in tree.children[node]:
@@ -181,16 +199,20 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
     out["power"] = float(np.sum(tables.power[n] * lengths[seg]))
     k, nt = tree.n_inlets, tree.n_terminals
     if terms.supply:
-        counts = supply_counts(tree.position[k:k + nt], tissue, physics.supply_radius)
+        counts = supply_counts(tree.position[k : k + nt], tissue, physics.supply_radius)
         out["supply"] = supply_cost(counts, tissue.mask)
     if terms.exclusion:
-        out["exclusion"] = float(sum(
-            tables.exclusion[tree.n_downstream[i]] * exclusion_sum(tree.position[i], tree.position[tree.parent[i]],
-                                                                   tissue)
-            for i in seg if tables.exclusion[tree.n_downstream[i]] > 0))
+        out["exclusion"] = float(
+            sum(
+                tables.exclusion[tree.n_downstream[i]]
+                * exclusion_sum(tree.position[i], tree.position[tree.parent[i]], tissue)
+                for i in seg
+                if tables.exclusion[tree.n_downstream[i]] > 0
+            )
+        )
     if terms.pressure:
         pressure = node_pressures(tree, physics, lengths)
-        out["pressure"] = float(np.sum((pressure[k:k + nt] - physics.pressure_terminal) ** 2))
+        out["pressure"] = float(np.sum((pressure[k : k + nt] - physics.pressure_terminal) ** 2))
     out["total"] = total_cost(out, physics)
     return out
 
@@ -198,5 +220,6 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
 def total_cost(terms: dict[str, float], physics: Physics) -> float:
     """The annealed cost C = (C_w + C_v) + (A_o C_o + A_p C_p + A_s C_s) / A_wv."""
     w_o, w_p, w_s = physics.weights
-    return (terms["volume"] + terms["power"]) + w_o * terms["exclusion"] + w_p * terms["pressure"] \
-        + w_s * terms["supply"]
+    return (
+        (terms["volume"] + terms["power"]) + w_o * terms["exclusion"] + w_p * terms["pressure"] + w_s * terms["supply"]
+    )

@@ -28,8 +28,22 @@ from .rng import seed_state
 from .tissue import Tissue, TissueError, build_tissue
 from .tree import Tree, TreeError, load_terminal_sites, random_tree
 
-__all__ = ["Problem", "RunResult", "build_problem", "initial_state", "calibrate_schedule", "run_block", "finish",
-           "running_costs", "tree_of", "tree_statistics", "state_arrays", "restore_state", "run", "CHECKPOINT_FIELDS"]
+__all__ = [
+    "Problem",
+    "RunResult",
+    "build_problem",
+    "initial_state",
+    "calibrate_schedule",
+    "run_block",
+    "finish",
+    "running_costs",
+    "tree_of",
+    "tree_statistics",
+    "state_arrays",
+    "restore_state",
+    "run",
+    "CHECKPOINT_FIELDS",
+]
 
 # State fields saved in a checkpoint (everything but scratch space).
 CHECKPOINT_FIELDS = tuple(f for f in kernel.State._fields if not f.startswith("scratch_"))
@@ -86,17 +100,30 @@ def build_problem(config: Any) -> Problem:
     if cfg.terminals.path:
         sites = load_terminal_sites(cfg.terminals.path, tissue)
         if len(sites) != n:
-            raise TreeError(f"terminals.path holds {len(sites)} sites but n_terminals = {n}; set n_terminals={len(sites)}")
+            raise TreeError(
+                f"terminals.path holds {len(sites)} sites but n_terminals = {n}; set n_terminals={len(sites)}"
+            )
     k = len(tissue.inlets)
     if n < k:
         raise TreeError(f"n_terminals must be >= the number of inlets ({k}) of tissue {tissue.name!r}, got {n}")
     p = cfg.physics
     physics = Physics(
-        n_terminals=n, n_inlets=k, gamma=p.gamma, inlet_radius=p.inlet_radius, total_flow=p.total_flow, m_b=p.m_b,
+        n_terminals=n,
+        n_inlets=k,
+        gamma=p.gamma,
+        inlet_radius=p.inlet_radius,
+        total_flow=p.total_flow,
+        m_b=p.m_b,
         viscosity=p.viscosity,
         supply_radius=supply_radius(n, tissue.measure, tissue.ndim, cfg.tissue.q_required, p.total_flow),
-        r_cutoff=p.r_cutoff, A_wv=p.A_wv, A_o=p.A_o, A_p=p.A_p, A_s=p.A_s, pressure_inlet=p.pressure_inlet,
-        pressure_terminal=p.pressure_terminal)
+        r_cutoff=p.r_cutoff,
+        A_wv=p.A_wv,
+        A_o=p.A_o,
+        A_p=p.A_p,
+        A_s=p.A_s,
+        pressure_inlet=p.pressure_inlet,
+        pressure_terminal=p.pressure_terminal,
+    )
     terms = active_terms(physics, cfg.terminals.fixed)
     w_o, w_p, w_s = physics.weights
     lo, hi = tissue.bounds
@@ -108,34 +135,57 @@ def build_problem(config: Any) -> Problem:
     if tissue.ndim == 2:
         cell_shape[2] = 1
     if np.prod(cell_shape) > 20_000_000:
-        raise ConfigError(f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
-                          "cells (at most 2e7); use a larger value (in R_supply, default 1)")
+        raise ConfigError(
+            f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
+            "cells (at most 2e7); use a larger value (in R_supply, default 1)"
+        )
     rho = physics.supply_radius / tissue.voxel_size
     if rho < 1.0:  # the supply term counts voxels within R_supply of a terminal: it needs several
         raise TissueError(
             f"tissue.voxel_size={tissue.voxel_size:.4g} m is coarser than the supply sphere (R_supply = "
             f"{physics.supply_radius:.4g} m at n_terminals={n}; the grid is {tissue.shape[2]} x {tissue.shape[1]} x "
             f"{tissue.shape[0]} voxels): the largest accepted voxel_size is R_supply. Set a smaller "
-            "tissue.voxel_size, or leave it unset (R_supply / 4)")
-    sphere_voxels = math.pi * rho ** 2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho ** 3  # C_s scale of one move
+            "tissue.voxel_size, or leave it unset (R_supply / 4)"
+        )
+    sphere_voxels = math.pi * rho**2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho**3  # C_s scale of one move
     model = kernel.Model(
-        n_inlets=k, n_terminals=n, tables=cost_tables(physics).array,
-        mask=tissue.mask, distance=tissue.distance, origin=tissue.origin,
-        voxel_size=float(tissue.voxel_size), box_lo=lo, box_hi=hi,
+        n_inlets=k,
+        n_terminals=n,
+        tables=cost_tables(physics).array,
+        mask=tissue.mask,
+        distance=tissue.distance,
+        origin=tissue.origin,
+        voxel_size=float(tissue.voxel_size),
+        box_lo=lo,
+        box_hi=hi,
         supply_rho=physics.supply_radius / tissue.voxel_size,
-        w_exclusion=w_o, w_pressure=w_p, w_supply=w_s,
-        supply_on=terms.supply, exclusion_on=terms.exclusion, pressure_on=terms.pressure,
-        move_terminals=not cfg.terminals.fixed, planar=tissue.ndim == 2,
-        pressure_inlet=p.pressure_inlet, pressure_terminal=p.pressure_terminal,
-        total_steps=float(total_steps), pack_steps=float(pack_steps),
-        pack_T_start=float(a.packing_T_start) * sphere_voxels, pack_T_end=float(a.packing_T_end),
-        p_swap=float(a.p_swap), p_local=float(a.p_local),
-        cell_lo=lo.astype(np.float64), cell_size=float(cell_size), cell_shape=cell_shape,
-        supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels, supply_T_end=float(a.supply_T_end),
+        w_exclusion=w_o,
+        w_pressure=w_p,
+        w_supply=w_s,
+        supply_on=terms.supply,
+        exclusion_on=terms.exclusion,
+        pressure_on=terms.pressure,
+        move_terminals=not cfg.terminals.fixed,
+        planar=tissue.ndim == 2,
+        pressure_inlet=p.pressure_inlet,
+        pressure_terminal=p.pressure_terminal,
+        total_steps=float(total_steps),
+        pack_steps=float(pack_steps),
+        pack_T_start=float(a.packing_T_start) * sphere_voxels,
+        pack_T_end=float(a.packing_T_end),
+        p_swap=float(a.p_swap),
+        p_local=float(a.p_local),
+        cell_lo=lo.astype(np.float64),
+        cell_size=float(cell_size),
+        cell_shape=cell_shape,
+        supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels,
+        supply_T_end=float(a.supply_T_end),
         supply_steps=float(round(a.supply_phase * (total_steps - pack_steps))) if a.supply_T_start is not None else 0.0,
-        adapt_steps=bool(a.adapt_steps), acceptance_target=float(a.acceptance_target),
+        adapt_steps=bool(a.adapt_steps),
+        acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
-        step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius)
+        step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
+    )
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
 
@@ -165,19 +215,31 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = kernel.State(
-        parent=tree.parent, children=tree.children, position=tree.position, n_downstream=tree.n_downstream,
-        seg_length=np.zeros(m), seg_exclusion=np.zeros(m),
+        parent=tree.parent,
+        children=tree.children,
+        position=tree.position,
+        n_downstream=tree.n_downstream,
+        seg_length=np.zeros(m),
+        seg_exclusion=np.zeros(m),
         supply=np.zeros(problem.tissue.shape, dtype=supply_dtype(problem.physics.n_terminals)),
-        costs=np.zeros(len(COST_TERMS)), compensation=np.zeros(len(COST_TERMS)), rng=rng,
-        counters=np.zeros(kernel.N_COUNTERS, dtype=np.int64), step_size=problem.model.step_max.copy(),
-        schedule=np.array([np.nan, np.nan]), cell_of=np.zeros(m, dtype=np.int64),
+        costs=np.zeros(len(COST_TERMS)),
+        compensation=np.zeros(len(COST_TERMS)),
+        rng=rng,
+        counters=np.zeros(kernel.N_COUNTERS, dtype=np.int64),
+        step_size=problem.model.step_max.copy(),
+        schedule=np.array([np.nan, np.nan]),
+        cell_of=np.zeros(m, dtype=np.int64),
         cell_head=np.zeros(int(np.prod(problem.model.cell_shape)), dtype=np.int64),
-        cell_next=np.zeros(m, dtype=np.int64), cell_prev=np.zeros(m, dtype=np.int64),
-        scratch_mark=np.zeros(m, dtype=np.int64), scratch_stack=np.zeros(m, dtype=np.int64),
-        scratch_pressure=np.zeros(m))
+        cell_next=np.zeros(m, dtype=np.int64),
+        cell_prev=np.zeros(m, dtype=np.int64),
+        scratch_mark=np.zeros(m, dtype=np.int64),
+        scratch_stack=np.zeros(m, dtype=np.int64),
+        scratch_pressure=np.zeros(m),
+    )
     kernel.initialise(problem.model, state)
-    state.schedule[:] = calibrate_schedule(problem, state) if None in (anneal.T_start, anneal.T_end) \
-        else (anneal.T_start, anneal.T_end)
+    state.schedule[:] = (
+        calibrate_schedule(problem, state) if None in (anneal.T_start, anneal.T_end) else (anneal.T_start, anneal.T_end)
+    )
     return state
 
 
@@ -194,13 +256,16 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
     """
     a = problem.config.anneal
     tables = cost_tables(problem.physics)
-    t_end = a.T_end if a.T_end is not None else \
-        a.T_end_rel * float(tables.volume[1] + tables.power[1]) * problem.physics.supply_radius
+    t_end = (
+        a.T_end
+        if a.T_end is not None
+        else a.T_end_rel * float(tables.volume[1] + tables.power[1]) * problem.physics.supply_radius
+    )
     if a.T_start is not None:
         return float(a.T_start), float(t_end)
     walker = restore_state(problem, state_arrays(state))
     uphill = np.empty(a.calibration_samples)
-    uphill = uphill[:kernel.sample_uphill(problem.model, walker, a.calibration_samples, uphill)]
+    uphill = uphill[: kernel.sample_uphill(problem.model, walker, a.calibration_samples, uphill)]
     t_start = 10.0 * t_end
     if uphill.size:
         # Mean acceptance exp(-dC/T) rises monotonically with T: bisect on log T.
@@ -227,15 +292,19 @@ def running_costs(problem: Problem, state: kernel.State) -> dict[str, float]:
     values = state.costs + state.compensation
     out = {name: float(values[i]) for i, name in enumerate(COST_TERMS)}
     w_o, w_p, w_s = problem.physics.weights
-    out["total"] = (out["volume"] + out["power"]) + w_o * out["exclusion"] + w_p * out["pressure"] \
-        + w_s * out["supply"]
+    out["total"] = (out["volume"] + out["power"]) + w_o * out["exclusion"] + w_p * out["pressure"] + w_s * out["supply"]
     return out
 
 
 def tree_of(problem: Problem, state: kernel.State) -> Tree:
     """A copy of the state's tree."""
-    return Tree(state.parent.copy(), state.children.copy(), state.position.copy(), state.n_downstream.copy(),
-                problem.physics.n_inlets)
+    return Tree(
+        state.parent.copy(),
+        state.children.copy(),
+        state.position.copy(),
+        state.n_downstream.copy(),
+        problem.physics.n_inlets,
+    )
 
 
 def tree_statistics(problem: Problem, tree: Tree) -> dict[str, float]:
@@ -259,13 +328,28 @@ def state_arrays(state: kernel.State) -> dict[str, np.ndarray]:
 def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.State:
     """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed."""
     m = 2 * problem.physics.n_terminals
-    dtypes = {"parent": np.int64, "children": np.int64, "n_downstream": np.int64,
-              "supply": supply_dtype(problem.physics.n_terminals), "rng": np.uint64, "counters": np.int64, "cell_of": np.int64, "cell_head": np.int64,
-              "cell_next": np.int64, "cell_prev": np.int64}
-    fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes.get(name, np.float64)).copy()
-              for name in CHECKPOINT_FIELDS}
-    return kernel.State(**fields, scratch_mark=np.zeros(m, dtype=np.int64), scratch_stack=np.zeros(m, dtype=np.int64),
-                        scratch_pressure=np.zeros(m))
+    dtypes = {
+        "parent": np.int64,
+        "children": np.int64,
+        "n_downstream": np.int64,
+        "supply": supply_dtype(problem.physics.n_terminals),
+        "rng": np.uint64,
+        "counters": np.int64,
+        "cell_of": np.int64,
+        "cell_head": np.int64,
+        "cell_next": np.int64,
+        "cell_prev": np.int64,
+    }
+    fields = {
+        name: np.ascontiguousarray(arrays[name], dtype=dtypes.get(name, np.float64)).copy()
+        for name in CHECKPOINT_FIELDS
+    }
+    return kernel.State(
+        **fields,
+        scratch_mark=np.zeros(m, dtype=np.int64),
+        scratch_stack=np.zeros(m, dtype=np.int64),
+        scratch_pressure=np.zeros(m),
+    )
 
 
 class Trace:
@@ -280,8 +364,9 @@ class Trace:
         step = int(state.counters[kernel.COUNTER_STEP])
         costs = running_costs(problem, state)
         temp = kernel.temperature(problem.model, state, max(step - 1, 0))
-        self.rows.append((step, temp, *(costs[c] for c in COST_TERMS), costs["total"],
-                          accepted / proposed if proposed else 0.0))
+        self.rows.append(
+            (step, temp, *(costs[c] for c in COST_TERMS), costs["total"], accepted / proposed if proposed else 0.0)
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
         data = np.array(self.rows, dtype=np.float64).reshape(-1, len(self.names))
@@ -292,8 +377,9 @@ class Trace:
 
 def accepted_moves(state: kernel.State) -> int:
     c = state.counters
-    return int(c[kernel.COUNTER_TERMINAL_ACCEPTED] + c[kernel.COUNTER_BIFURCATION_ACCEPTED]
-               + c[kernel.COUNTER_SWAP_ACCEPTED])
+    return int(
+        c[kernel.COUNTER_TERMINAL_ACCEPTED] + c[kernel.COUNTER_BIFURCATION_ACCEPTED] + c[kernel.COUNTER_SWAP_ACCEPTED]
+    )
 
 
 def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
@@ -303,9 +389,12 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
     Returns the ``anneal`` report stored with a run: the schedule's temperatures [W], the
     final translation half-widths [m] and, with polish, its before/after costs.
     """
-    report: dict[str, Any] = {"T_start": float(state.schedule[0]), "T_end": float(state.schedule[1]),
-                              "step_terminal": float(state.step_size[0]),
-                              "step_bifurcation": float(state.step_size[1])}
+    report: dict[str, Any] = {
+        "T_start": float(state.schedule[0]),
+        "T_end": float(state.schedule[1]),
+        "step_terminal": float(state.step_size[0]),
+        "step_bifurcation": float(state.step_size[1]),
+    }
     a = problem.config.anneal
     if a.polish:
         from .finish import descend_swaps, polish
@@ -317,15 +406,25 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
             polish(problem, state)  # exclusion may leave the new optimum only partly taken
         state.rng[:], state.counters[:] = rng_saved, counters_saved
         after = running_costs(problem, state)
-        report["polish"] = {"applied": result["applied"], "moved": result["moved"], "swaps": swaps,
-                            "total_before": result["before"]["total"], "total_after": after["total"],
-                            "vascular_before": result["before"]["volume"] + result["before"]["power"],
-                            "vascular_after": after["volume"] + after["power"]}
+        report["polish"] = {
+            "applied": result["applied"],
+            "moved": result["moved"],
+            "swaps": swaps,
+            "total_before": result["before"]["total"],
+            "total_after": after["total"],
+            "vascular_before": result["before"]["volume"] + result["before"]["power"],
+            "vascular_after": after["volume"] + after["power"],
+        }
     return report
 
 
-def run(config: Any, seed: int | None = None, *, block_steps: int | None = None,
-        progress: Callable[[int, int, dict], None] | None = None) -> RunResult:
+def run(
+    config: Any,
+    seed: int | None = None,
+    *,
+    block_steps: int | None = None,
+    progress: Callable[[int, int, dict], None] | None = None,
+) -> RunResult:
     """Grow one tree from (config, seed) and return it with running and recomputed costs.
 
     ``seed`` defaults to ``config.seed``. ``block_steps`` (default ``anneal.trace_every``)
@@ -350,8 +449,15 @@ def run(config: Any, seed: int | None = None, *, block_steps: int | None = None,
     report = finish(problem, state)
     tree = tree_of(problem, state)
     return RunResult(
-        tree=tree, problem=problem, seed=seed, costs=running_costs(problem, state),
+        tree=tree,
+        problem=problem,
+        seed=seed,
+        costs=running_costs(problem, state),
         costs_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
-        steps=int(state.counters[kernel.COUNTER_STEP]), wall_seconds=time.perf_counter() - start,
-        trace=trace.arrays(), counters=state.counters.copy(), anneal=report,
-        statistics=tree_statistics(problem, tree))
+        steps=int(state.counters[kernel.COUNTER_STEP]),
+        wall_seconds=time.perf_counter() - start,
+        trace=trace.arrays(),
+        counters=state.counters.copy(),
+        anneal=report,
+        statistics=tree_statistics(problem, tree),
+    )

@@ -51,8 +51,9 @@ def terminals_downstream(parent, kind) -> np.ndarray:
     return count
 
 
-def tree_table(parent, position, radius, kind, *, total_flow: float | None = None, orders=None,
-               strahler=None) -> pd.DataFrame:
+def tree_table(
+    parent, position, radius, kind, *, total_flow: float | None = None, orders=None, strahler=None
+) -> pd.DataFrame:
     """One row per node with its segment's properties.
 
     Parameters
@@ -86,12 +87,18 @@ def tree_table(parent, position, radius, kind, *, total_flow: float | None = Non
             strahler = ds.segment_order.sel(scheme="strahler").values
     seg = parent >= 0
     n_down = terminals_downstream(parent, kind)
-    table = pd.DataFrame({
-        "node": np.arange(parent.size), "parent": parent, "kind": kind,
-        "x_m": position[:, 0], "y_m": position[:, 1], "z_m": position[:, 2],
-        "radius_m": np.where(seg, radius, np.nan),
-        "length_m": np.where(seg, _m.segment_lengths(parent, position), np.nan),
-    })
+    table = pd.DataFrame(
+        {
+            "node": np.arange(parent.size),
+            "parent": parent,
+            "kind": kind,
+            "x_m": position[:, 0],
+            "y_m": position[:, 1],
+            "z_m": position[:, 2],
+            "radius_m": np.where(seg, radius, np.nan),
+            "length_m": np.where(seg, _m.segment_lengths(parent, position), np.nan),
+        }
+    )
     if total_flow is not None:
         n_terminals = int((kind == _m.KIND_TERMINAL).sum())
         table["flow_m3_s"] = np.where(seg, n_down * float(total_flow) / n_terminals, np.nan)
@@ -107,8 +114,10 @@ def _data_array(name: str, values: np.ndarray, components: int = 1) -> str:
     else:
         vtype, text = "Int64", " ".join(str(int(v)) for v in values.reshape(-1))
     comp = f' NumberOfComponents="{components}"' if components != 1 else ""
-    return (f'        <DataArray type="{vtype}" Name={quoteattr(name)}{comp} format="ascii">\n'
-            f"          {text}\n        </DataArray>\n")
+    return (
+        f'        <DataArray type="{vtype}" Name={quoteattr(name)}{comp} format="ascii">\n'
+        f"          {text}\n        </DataArray>\n"
+    )
 
 
 def write_vtp(path, table: pd.DataFrame) -> Path:
@@ -146,13 +155,18 @@ def write_vtp(path, table: pd.DataFrame) -> Path:
         f'    <Piece NumberOfPoints="{len(table)}" NumberOfVerts="0" NumberOfLines="{child.size}" '
         'NumberOfStrips="0" NumberOfPolys="0">\n',
         '      <PointData Scalars="radius">\n',
-        _data_array("radius", point_radius), _data_array("kind", table["kind"].to_numpy()),
+        _data_array("radius", point_radius),
+        _data_array("kind", table["kind"].to_numpy()),
         "      </PointData>\n",
         '      <CellData Scalars="radius">\n',
         *(_data_array(k, v) for k, v in cell.items()),
         "      </CellData>\n",
-        "      <Points>\n", _data_array("Points", points, 3), "      </Points>\n",
-        "      <Lines>\n", _data_array("connectivity", connectivity), _data_array("offsets", offsets),
+        "      <Points>\n",
+        _data_array("Points", points, 3),
+        "      </Points>\n",
+        "      <Lines>\n",
+        _data_array("connectivity", connectivity),
+        _data_array("offsets", offsets),
         "      </Lines>\n",
         "    </Piece>\n  </PolyData>\n</VTKFile>\n",
     ]
@@ -171,8 +185,9 @@ def write_csv(path, table: pd.DataFrame) -> Path:
     return path
 
 
-def export_tree(out_dir, name: str, parent, position, radius, kind, *, total_flow: float | None = None,
-                orders=None, strahler=None) -> tuple[Path, Path]:
+def export_tree(
+    out_dir, name: str, parent, position, radius, kind, *, total_flow: float | None = None, orders=None, strahler=None
+) -> tuple[Path, Path]:
     """Write ``<out_dir>/<name>.vtp`` and ``<out_dir>/<name>.csv`` for a tree; returns both paths.
 
     Parameters are those of :func:`tree_table`.
@@ -209,9 +224,17 @@ def export_run(store_path, out_dir, name: str | None = None) -> tuple[Path, Path
 
     store = RunStore.open(store_path, mode="r")
     if store.status != STATUS_COMPLETE:
-        raise StoreError(f"run store {str(store_path)!r} has status {store.status!r}: only complete runs "
-                         "have a final tree to export")
+        raise StoreError(
+            f"run store {str(store_path)!r} has status {store.status!r}: only complete runs have a final tree to export"
+        )
     tree = store.read_tree()
     total_flow = (store.attrs.get("physics") or {}).get("total_flow")
-    return export_tree(out_dir, name or store.run_id, tree["parent"], tree["position"], tree["radius"],
-                       tree["kind"], total_flow=total_flow)
+    return export_tree(
+        out_dir,
+        name or store.run_id,
+        tree["parent"],
+        tree["position"],
+        tree["radius"],
+        tree["kind"],
+        total_flow=total_flow,
+    )

@@ -25,11 +25,10 @@ Units in the plots follow Kassab's tables (diameter in um, length in mm); the da
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from pathlib import Path
-
-import functools
 
 import matplotlib
 import matplotlib.ticker
@@ -40,14 +39,25 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
-__all__ = ["make_figures", "plot_morphometry", "plot_asymmetry", "plot_mb_effect", "plot_cost_traces",
-           "plot_convergence", "plot_tree", "REFERENCE_M_B"]
+__all__ = [
+    "make_figures",
+    "plot_morphometry",
+    "plot_asymmetry",
+    "plot_mb_effect",
+    "plot_cost_traces",
+    "plot_convergence",
+    "plot_tree",
+    "REFERENCE_M_B",
+]
 
 REFERENCE_M_B = 641.3  # W m^-3, the physiological value: the m_b shown when a figure shows one
 FIGURES_DIR = "figures"
 _DPI = 200
-_KASSAB_STYLE = {"RCA": dict(marker="o", color="0.15"), "LAD": dict(marker="s", color="0.45"),
-                 "LCX": dict(marker="^", color="0.65")}
+_KASSAB_STYLE = {
+    "RCA": dict(marker="o", color="0.15"),
+    "LAD": dict(marker="s", color="0.45"),
+    "LCX": dict(marker="^", color="0.65"),
+}
 _UM, _MM = 1e6, 1e3
 # Inlet names by tissue, in inlet order (the run store keeps positions, not names; see heart.py).
 _INLET_NAMES = {"heart": ("LCA", "RCA")}
@@ -55,8 +65,14 @@ _INLET_NAMES = {"heart": ("LCA", "RCA")}
 # Our figures' style, applied inside each plotting function only (rc_context): importing this
 # module or drawing a figure changes neither the caller's backend nor their rcParams. Figures
 # are plain Figure objects (no pyplot state); savefig renders PNG with Agg, no display needed.
-_STYLE = {"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9, "legend.fontsize": 7.5,
-          "legend.frameon": False, "savefig.bbox": "tight"}
+_STYLE = {
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.labelsize": 9,
+    "legend.fontsize": 7.5,
+    "legend.frameon": False,
+    "savefig.bbox": "tight",
+}
 
 
 def _styled(func):
@@ -64,6 +80,7 @@ def _styled(func):
     def wrapper(*args, **kwargs):
         with matplotlib.rc_context(_STYLE):
             return func(*args, **kwargs)
+
     return wrapper
 
 
@@ -148,17 +165,36 @@ def _kassab(ax, kassab: xr.Dataset, what: str, scale: float, orders) -> None:
         ok = np.isfinite(mean) & np.isin(r.order.values, orders)
         with np.errstate(invalid="ignore", divide="ignore"):
             se = np.where(n > 1, sd / np.sqrt(np.maximum(n, 1)), np.nan)
-        ax.errorbar(r.order.values[ok] + {"RCA": -0.12, "LAD": 0.0, "LCX": 0.12}[artery], mean[ok] * scale,
-                    yerr=np.nan_to_num(se[ok] * scale), linestyle="none", markersize=4, markerfacecolor="white",
-                    capsize=1.5, elinewidth=0.7, label=f"Kassab 1993 {artery}", **style)
+        ax.errorbar(
+            r.order.values[ok] + {"RCA": -0.12, "LAD": 0.0, "LCX": 0.12}[artery],
+            mean[ok] * scale,
+            yerr=np.nan_to_num(se[ok] * scale),
+            linestyle="none",
+            markersize=4,
+            markerfacecolor="white",
+            capsize=1.5,
+            elinewidth=0.7,
+            label=f"Kassab 1993 {artery}",
+            **style,
+        )
 
 
 def _model(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, label: str) -> None:
     m = morph.sel(point).sel(scheme="diameter_defined")
     mean, se = m[f"element_{what}_mean"].values, m[f"element_{what}_se"].values
     ok = np.isfinite(mean)
-    ax.errorbar(m.order.values[ok], mean[ok] * scale, yerr=np.nan_to_num(se[ok] * scale), color=color, marker="o",
-                markersize=3.5, linewidth=1.4, capsize=2, elinewidth=0.9, label=label)
+    ax.errorbar(
+        m.order.values[ok],
+        mean[ok] * scale,
+        yerr=np.nan_to_num(se[ok] * scale),
+        color=color,
+        marker="o",
+        markersize=3.5,
+        linewidth=1.4,
+        capsize=2,
+        elinewidth=0.9,
+        label=label,
+    )
 
 
 _WHAT = {"diameter": ("D", _UM, "element diameter [µm]"), "length": ("L", _MM, "element length [mm]")}
@@ -177,8 +213,7 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     orders = morph.order.values
     orders = orders[orders >= 1]
     ncols = 2 if len(ns) > 1 else 1
-    fig, axes = _subplots(2, ncols, figsize=(3.6 * ncols + 0.4, 6.2), squeeze=False, sharex=True,
-                             sharey="row")
+    fig, axes = _subplots(2, ncols, figsize=(3.6 * ncols + 0.4, 6.2), squeeze=False, sharex=True, sharey="row")
     colors = _colors(len(ns))
     for row, what in enumerate(("diameter", "length")):
         key, scale, ylabel = _WHAT[what]
@@ -201,8 +236,7 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
         axes[0, 1].set_title("every N")
     for a in axes[0]:
         a.legend(loc="upper left")
-    fig.suptitle(f"Best tree per cell against pig coronary arteries ({_point_text(point)}); "
-                 "mean ± SE", fontsize=9)
+    fig.suptitle(f"Best tree per cell against pig coronary arteries ({_point_text(point)}); mean ± SE", fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -211,8 +245,18 @@ def _ratio(ax, asym: xr.Dataset, point: dict, which: str, color, label: str) -> 
     a = asym.sel(point).sel(scheme="diameter_defined")
     mean, se = a[f"diameter_ratio_{which}_mean"].values, a[f"diameter_ratio_{which}_se"].values
     ok = np.isfinite(mean)
-    ax.errorbar(a.order.values[ok], mean[ok], yerr=np.nan_to_num(se[ok]), color=color, marker="o", markersize=3.5,
-                linewidth=1.2, capsize=2, elinewidth=0.8, label=label)
+    ax.errorbar(
+        a.order.values[ok],
+        mean[ok],
+        yerr=np.nan_to_num(se[ok]),
+        color=color,
+        marker="o",
+        markersize=3.5,
+        linewidth=1.2,
+        capsize=2,
+        elinewidth=0.8,
+        label=label,
+    )
 
 
 _RATIO_LABEL = {"small": ("smaller daughter", "D$_s$/D$_p$"), "large": ("larger daughter", "D$_l$/D$_p$")}
@@ -281,11 +325,16 @@ def plot_mb_effect(summary: xr.DataTree, path) -> Path | None:
     axes[0, 0].legend(loc="upper left")
     counts = asym["bifurcation_count"].sel({**base, "n_terminals": n}).sel(scheme="diameter_defined")
     ratio_orders = asym.order.values[(counts > 0).any("m_b").values]
-    _ratio_panels(axes[1], asym, [({**base, "n_terminals": n, "m_b": m}, _mb_text(m)) for m in mbs], colors,
-                  ratio_orders)
+    _ratio_panels(
+        axes[1], asym, [({**base, "n_terminals": n, "m_b": m}, _mb_text(m)) for m in mbs], colors, ratio_orders
+    )
     axes[1, 0].legend(loc="lower left")
-    fig.suptitle(f"Effect of the blood cost m_b on the best tree (N = {n}"
-                 + (f", {_point_text(base)}" if base else "") + "); mean ± SE", fontsize=9)
+    fig.suptitle(
+        f"Effect of the blood cost m_b on the best tree (N = {n}"
+        + (f", {_point_text(base)}" if base else "")
+        + "); mean ± SE",
+        fontsize=9,
+    )
     fig.tight_layout()
     return _save(fig, path)
 
@@ -337,8 +386,13 @@ def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path |
             total = t["total"].sel(seed=s).values[:k]
             keep = step > 0  # log step axis: the initial record (step 0) is left out
             step, total = step[keep], total[keep]
-            ax.plot(step, total, color=colors[i], linewidth=1.8 if best[i] else 0.8,
-                    label=f"seed {int(s)}" + (" (best)" if best[i] else ""))
+            ax.plot(
+                step,
+                total,
+                color=colors[i],
+                linewidth=1.8 if best[i] else 0.8,
+                label=f"seed {int(s)}" + (" (best)" if best[i] else ""),
+            )
         positive = t["total"].values[np.isfinite(t["total"].values)]
         if positive.size and positive.min() > 0 and positive.max() / positive.min() > 20:
             ax.set_yscale("log")
@@ -347,7 +401,7 @@ def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path |
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.legend(loc="upper right", fontsize=6.5)
-    for ax in axes.flat[len(cells):]:
+    for ax in axes.flat[len(cells) :]:
         ax.set_visible(False)
     units = traces["total"].attrs.get("units", "")
     for ax in axes[:, 0]:
@@ -362,7 +416,7 @@ def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path |
 def _sci(value: float) -> str:
     """1e5 -> '$10^{5}$', 3e5 -> '$3{\\times}10^{5}$' (tick labels)."""
     exp = int(math.floor(math.log10(value)))
-    mant = value / 10 ** exp
+    mant = value / 10**exp
     if abs(mant - 1) < 1e-9:
         return f"$10^{{{exp}}}$"
     return f"${mant:.3g}{{\\times}}10^{{{exp}}}$"
@@ -380,8 +434,10 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
     fig, axes = _subplots(1, 2, figsize=(8.2, 3.4))
     colors = _colors(len(groups), "tab10" if len(groups) <= 10 else "viridis")  # categories, not a scale
     steps = costs.steps.values.astype(float)
-    panels = ((costs["cost_total"], f"final annealed total cost C [{costs['cost_total'].attrs.get('units', '')}]"),
-              (costs["cost_volume"] + costs["cost_power"], "final C$_v$ + C$_w$ [W]"))
+    panels = (
+        (costs["cost_total"], f"final annealed total cost C [{costs['cost_total'].attrs.get('units', '')}]"),
+        (costs["cost_volume"] + costs["cost_power"], "final C$_v$ + C$_w$ [W]"),
+    )
     drawn = False
     for ax, (values, ylabel) in zip(axes, panels):
         for point, c in zip(groups, colors):
@@ -393,10 +449,26 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
             if not ok.any():
                 continue
             drawn = True
-            label = ", ".join(p for p in (_cell_title({**point, "n_terminals": point.get("n_terminals", 0),
-                                                       "m_b": point.get("m_b", math.nan)}),) if p)
-            ax.errorbar(steps[ok], mean.values[ok], yerr=np.nan_to_num(se.values[ok]), color=c, marker="o",
-                        markersize=4, capsize=2.5, linewidth=1.2, label=f"{label} (n = {int(n.max())} seeds)")
+            label = ", ".join(
+                p
+                for p in (
+                    _cell_title(
+                        {**point, "n_terminals": point.get("n_terminals", 0), "m_b": point.get("m_b", math.nan)}
+                    ),
+                )
+                if p
+            )
+            ax.errorbar(
+                steps[ok],
+                mean.values[ok],
+                yerr=np.nan_to_num(se.values[ok]),
+                color=c,
+                marker="o",
+                markersize=4,
+                capsize=2.5,
+                linewidth=1.2,
+                label=f"{label} (n = {int(n.max())} seeds)",
+            )
         ax.set_xscale("log")
         # ticks at the sweep's step counts (minor log labels crowd, major ones may be absent)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
@@ -456,15 +528,26 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
             ax.contourf(cols, rows, proj.astype(float), levels=[0.5, 1.5], colors=["0.93"])
             ax.contour(cols, rows, proj.astype(float), levels=[0.5], colors=["0.55"], linewidths=0.7)
         elif proj.any():  # a full rectangle: draw its frame
-            ax.add_patch(Rectangle((cols[0] - h * _MM / 2, rows[0] - h * _MM / 2), cols[-1] - cols[0] + h * _MM,
-                                       rows[-1] - rows[0] + h * _MM, facecolor="0.93", edgecolor="0.55",
-                                       linewidth=0.7))
+            ax.add_patch(
+                Rectangle(
+                    (cols[0] - h * _MM / 2, rows[0] - h * _MM / 2),
+                    cols[-1] - cols[0] + h * _MM,
+                    rows[-1] - rows[0] + h * _MM,
+                    facecolor="0.93",
+                    edgecolor="0.55",
+                    linewidth=0.7,
+                )
+            )
         # thin vessels first so that trunks stay on top
         order = np.argsort(radius[seg])
         s = seg[order]
         lines = np.stack([pos[parent[s]][:, [col_axis, row_axis]], pos[s][:, [col_axis, row_axis]]], axis=1)
-        lc = LineCollection(lines, linewidths=widths[order], colors=[colors(int(np.searchsorted(inlets, inlet[v])) % 10)
-                                                                     for v in s], capstyle="round")
+        lc = LineCollection(
+            lines,
+            linewidths=widths[order],
+            colors=[colors(int(np.searchsorted(inlets, inlet[v])) % 10) for v in s],
+            capstyle="round",
+        )
         ax.add_collection(lc)
         ax.plot(pos[inlets, col_axis], pos[inlets, row_axis], "k*", markersize=7, zorder=5)
         ax.set_aspect("equal")
@@ -472,14 +555,23 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
         ax.set_xlabel(f"{a} [mm]")
         ax.set_ylabel(f"{b} [mm]")
     names = _INLET_NAMES.get(str(t_attrs.get("name")), ())
-    handles = [Line2D([], [], color=colors(i % 10), linewidth=2,
-                          label=f"{names[i]} tree" if i < len(names) else f"inlet {i} tree")
-               for i in range(len(inlets))]
+    handles = [
+        Line2D(
+            [], [], color=colors(i % 10), linewidth=2, label=f"{names[i]} tree" if i < len(names) else f"inlet {i} tree"
+        )
+        for i in range(len(inlets))
+    ]
     handles.append(Line2D([], [], color="k", marker="*", linestyle="none", label="inlet"))
     axes[0, -1].legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
     fig.suptitle(title or store.run_id, fontsize=9)
-    fig.text(0.5, -0.02, f"line width ∝ vessel radius (thickest: {2 * rmax * _MM:.2g} mm diameter); grey: tissue "
-                         "(projection of the voxel mask)", ha="center", fontsize=7)
+    fig.text(
+        0.5,
+        -0.02,
+        f"line width ∝ vessel radius (thickest: {2 * rmax * _MM:.2g} mm diameter); grey: tissue "
+        "(projection of the voxel mask)",
+        ha="center",
+        fontsize=7,
+    )
     fig.tight_layout()
     return _save(fig, path)
 
@@ -511,9 +603,13 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
 
     out = Path(output_dir) / FIGURES_DIR
     paths = []
-    for func, name in ((plot_morphometry, "morphometry_vs_kassab.png"), (plot_asymmetry, "asymmetry.png"),
-                       (plot_mb_effect, "mb_effect.png"), (plot_cost_traces, "cost_traces.png"),
-                       (plot_convergence, "convergence.png")):
+    for func, name in (
+        (plot_morphometry, "morphometry_vs_kassab.png"),
+        (plot_asymmetry, "asymmetry.png"),
+        (plot_mb_effect, "mb_effect.png"),
+        (plot_cost_traces, "cost_traces.png"),
+        (plot_convergence, "convergence.png"),
+    ):
         p = func(summary, out / name)
         if p is not None:
             paths.append(p)
@@ -523,7 +619,6 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
         if not run_id:
             continue
         cost = float(morph["best_cost"].sel(point))
-        title = (f"{run_id}: best of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.4g} "
-                 f"({_cell_title(point)})")
+        title = f"{run_id}: best of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.4g} ({_cell_title(point)})"
         paths.append(plot_tree(run_path(output_dir, run_id), out / f"tree_{run_id}.png", title))
     return paths

@@ -38,8 +38,14 @@ import scipy.sparse.linalg as spla
 from .physics import Physics, cost_tables
 from .tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
-__all__ = ["BifurcationOptimum", "vascular_weights", "vascular_cost", "optimal_bifurcations", "topologies",
-           "best_topology"]
+__all__ = [
+    "BifurcationOptimum",
+    "vascular_weights",
+    "vascular_cost",
+    "optimal_bifurcations",
+    "topologies",
+    "best_topology",
+]
 
 
 @dataclass
@@ -223,9 +229,16 @@ def _weiszfeld(x, parent, w, free, levels, depth, scale, iterations):
         both = fi & fj
         n = order.size
         diag = np.bincount(vi[fi], a[fi], n) + np.bincount(vj[fj], a[fj], n)
-        lap = sp.csc_matrix((np.concatenate([diag, -a[both], -a[both]]),
-                             (np.concatenate([np.arange(n), vi[both], vj[both]]),
-                              np.concatenate([np.arange(n), vj[both], vi[both]]))), shape=(n, n))
+        lap = sp.csc_matrix(
+            (
+                np.concatenate([diag, -a[both], -a[both]]),
+                (
+                    np.concatenate([np.arange(n), vi[both], vj[both]]),
+                    np.concatenate([np.arange(n), vj[both], vi[both]]),
+                ),
+            ),
+            shape=(n, n),
+        )
         rhs = np.zeros((n, x.shape[1]))
         np.add.at(rhs, vi[fi & ~fj], a[fi & ~fj, None] * x[j[fi & ~fj]])
         np.add.at(rhs, vj[fj & ~fi], a[fj & ~fi, None] * x[i[fj & ~fi]])
@@ -307,9 +320,15 @@ def _side_forces(x, parent, w, levels, con):
     return idx, force, has_fixed[idx] > 0
 
 
-def optimal_bifurcations(tree: Tree, weights: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None = None, *,
-                         collapse_tol: float = 1e-10, max_newton: int = 400, max_rounds: int = 200
-                         ) -> BifurcationOptimum:
+def optimal_bifurcations(
+    tree: Tree,
+    weights: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    *,
+    collapse_tol: float = 1e-10,
+    max_newton: int = 400,
+    max_rounds: int = 200,
+) -> BifurcationOptimum:
     """Bifurcation positions minimising sum_i w_i L_i for the tree's fixed topology.
 
     Parameters
@@ -422,7 +441,6 @@ def _admissible(collapsed, parent, levels, depth, fixed):
         collapsed[cand[np.argmin(depth[cand])]] = False
 
 
-
 # --------------------------------------------------------------------------------------
 # Exhaustive search on small instances
 
@@ -457,8 +475,9 @@ def topologies(n_terminals: int):
     yield from grow(parent, 2, n_terminals + 1)
 
 
-def best_topology(inlet: np.ndarray, terminals: np.ndarray, physics: Physics,
-                  bounds: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, Tree, list[float]]:
+def best_topology(
+    inlet: np.ndarray, terminals: np.ndarray, physics: Physics, bounds: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[float, Tree, list[float]]:
     """The global minimum of C_v + C_w over every topology on fixed terminals, one inlet.
 
     Parameters
@@ -480,7 +499,7 @@ def best_topology(inlet: np.ndarray, terminals: np.ndarray, physics: Physics,
     for parent in topologies(n):
         position = np.zeros((2 * n, 3))
         position[0] = inlet
-        position[1:n + 1] = terminals
+        position[1 : n + 1] = terminals
         tree = Tree(parent, children_from_parent(parent), position, count_terminals(parent, n, 1), 1)
         _place_from_children(tree)
         res = optimal_bifurcations(tree, vascular_weights(tree, physics), bounds)

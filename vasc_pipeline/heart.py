@@ -68,26 +68,38 @@ __all__ = ["heart_tissue", "heart_dimensions", "RV_EXPONENT", "DEFAULT_MASS_G", 
 
 log = logging.getLogger(__name__)
 
-DEFAULT_MASS_G = 218.0          # g (paper)
-DEFAULT_DENSITY = 1.06e3        # kg m^-3 (paper, Vinnakota 2004)
-RV_EXPONENT = 2.5               # super-ellipsoid exponent of the RV (paper)
-MARGIN_FRACTION = 0.12          # grid margin around the heart, fraction of its largest extent
+DEFAULT_MASS_G = 218.0  # g (paper)
+DEFAULT_DENSITY = 1.06e3  # kg m^-3 (paper, Vinnakota 2004)
+RV_EXPONENT = 2.5  # super-ellipsoid exponent of the RV (paper)
+MARGIN_FRACTION = 0.12  # grid margin around the heart, fraction of its largest extent
 
 # Unscaled reference geometry [m] (see the module docstring).
 _CM = 1e-2
 _BASE = dict(
     lv_center_z=-2.0 * _CM,
-    lv_outer_radius=3.0 * _CM, lv_outer_half_length=6.0 * _CM,
-    lv_inner_radius=2.0 * _CM, lv_inner_half_length=5.2 * _CM,
-    rv_center_x=2.0 * _CM, rv_center_z=-2.0 * _CM,
+    lv_outer_radius=3.0 * _CM,
+    lv_outer_half_length=6.0 * _CM,
+    lv_inner_radius=2.0 * _CM,
+    lv_inner_half_length=5.2 * _CM,
+    rv_center_x=2.0 * _CM,
+    rv_center_z=-2.0 * _CM,
     rv_outer_semi_axes=(2.8 * _CM, 3.3 * _CM, 4.5 * _CM),
     rv_inner_semi_axes=(2.4 * _CM, 2.9 * _CM, 4.1 * _CM),
     aortic_root_center=(1.6 * _CM, -0.4 * _CM),
     aortic_root_radius=1.3 * _CM,
     ostium_height=0.5 * _CM,
 )
-_LENGTH_KEYS = ("lv_center_z", "lv_outer_radius", "lv_outer_half_length", "lv_inner_radius",
-                "lv_inner_half_length", "rv_center_x", "rv_center_z", "aortic_root_radius", "ostium_height")
+_LENGTH_KEYS = (
+    "lv_center_z",
+    "lv_outer_radius",
+    "lv_outer_half_length",
+    "lv_inner_radius",
+    "lv_inner_half_length",
+    "rv_center_x",
+    "rv_center_z",
+    "aortic_root_radius",
+    "ostium_height",
+)
 _TUPLE_KEYS = ("rv_outer_semi_axes", "rv_inner_semi_axes", "aortic_root_center")
 
 
@@ -125,8 +137,7 @@ def _half_extent_y(x, z, d: dict):
 def _extent(d: dict) -> tuple[np.ndarray, np.ndarray]:
     """Bounding box [x, y, z] of the myocardium (lower, upper) [m]."""
     ax, ay, az = d["rv_outer_semi_axes"]
-    lo = np.array([-d["lv_outer_radius"], -max(d["lv_outer_radius"], ay),
-                   d["lv_center_z"] - d["lv_outer_half_length"]])
+    lo = np.array([-d["lv_outer_radius"], -max(d["lv_outer_radius"], ay), d["lv_center_z"] - d["lv_outer_half_length"]])
     hi = np.array([max(d["lv_outer_radius"], d["rv_center_x"] + ax), max(d["lv_outer_radius"], ay), 0.0])
     return lo, hi
 
@@ -174,14 +185,14 @@ def _inside(d: dict, solid: bool = False):
         zs = np.asarray(z[:, 0, 0], dtype=np.float64)
         out = np.zeros((zs.size, ys.size, xs.size), dtype=bool)  # also right for sparse grids
         # |y|^p / ay^p and y^2 / a^2 terms per row, x terms per column: (ny, 1) + (1, nx)
-        y2 = (ys ** 2)[:, None]
-        x2 = (xs ** 2)[None, :]
+        y2 = (ys**2)[:, None]
+        x2 = (xs**2)[None, :]
         adx = np.abs(xs - d["rv_center_x"])[None, :]
         ay_abs = np.abs(ys)[:, None]
         a_o, c_o = d["lv_outer_radius"], d["lv_outer_half_length"]
         a_i, c_i = d["lv_inner_radius"], d["lv_inner_half_length"]
-        lv_o_xy = ((x2 + y2) / a_o ** 2).astype(np.float32)
-        lv_i_xy = ((x2 + y2) / a_i ** 2).astype(np.float32)
+        lv_o_xy = ((x2 + y2) / a_o**2).astype(np.float32)
+        lv_i_xy = ((x2 + y2) / a_i**2).astype(np.float32)
         (oxa, oya, oza), (ixa, iya, iza) = d["rv_outer_semi_axes"], d["rv_inner_semi_axes"]
         rv_o_xy = ((adx / oxa) ** p + (ay_abs / oya) ** p).astype(np.float32)
         rv_i_xy = ((adx / ixa) ** p + (ay_abs / iya) ** p).astype(np.float32)
@@ -190,12 +201,12 @@ def _inside(d: dict, solid: bool = False):
                 continue
             dz_lv = (zk - d["lv_center_z"]) ** 2
             dz_rv = abs(zk - d["rv_center_z"])
-            lv_outer = lv_o_xy <= np.float32(1.0 - dz_lv / c_o ** 2)
+            lv_outer = lv_o_xy <= np.float32(1.0 - dz_lv / c_o**2)
             rv_outer = rv_o_xy <= np.float32(1.0 - (dz_rv / oza) ** p)
             if solid:
                 out[k] = lv_outer | rv_outer
             else:
-                lv_inner = lv_i_xy <= np.float32(1.0 - dz_lv / c_i ** 2)
+                lv_inner = lv_i_xy <= np.float32(1.0 - dz_lv / c_i**2)
                 rv_inner = rv_i_xy <= np.float32(1.0 - (dz_rv / iza) ** p)
                 out[k] = (lv_outer & ~lv_inner) | (rv_outer & ~rv_inner & ~lv_outer)
         return out
@@ -229,10 +240,10 @@ def _dimensions(mass_g: float, density: float) -> dict:
         bbox_hi=tuple(hi.tolist()),
         inlets=tuple(map(tuple, _inlets(d).tolist())),
         inlet_names=("LCA", "RCA"),
-        volume=float(_reference_volume() * s ** 3),
+        volume=float(_reference_volume() * s**3),
         mass_g_target=mass_g,
         density=density,
-        mass_g_reference=float(_reference_volume() * s ** 3 * density * 1e3),
+        mass_g_reference=float(_reference_volume() * s**3 * density * 1e3),
     )
     return d
 
@@ -249,13 +260,19 @@ def _open_base(solid: np.ndarray) -> np.ndarray:
     """
     top = int(np.flatnonzero(solid.any(axis=(1, 2))).max())  # z index of the base layer
     openings = np.zeros(solid.shape, dtype=bool)
-    openings[top + 1:] = solid[top] == 1
+    openings[top + 1 :] = solid[top] == 1
     return openings
 
 
-def _build(n_terminals: int, voxel_size: float | None, mass_g: float, density: float,
-           exclude_cavities: bool = True, q_required: float | None = None,
-           total_flow: float | None = None) -> tuple[Tissue, dict]:
+def _build(
+    n_terminals: int,
+    voxel_size: float | None,
+    mass_g: float,
+    density: float,
+    exclude_cavities: bool = True,
+    q_required: float | None = None,
+    total_flow: float | None = None,
+) -> tuple[Tissue, dict]:
     d = dict(_dimensions(mass_g, density))
     volume = d["volume"]
     h = voxel_size if voxel_size is not None else default_voxel_size(n_terminals, volume, 3, q_required, total_flow)
@@ -269,8 +286,7 @@ def _build(n_terminals: int, voxel_size: float | None, mass_g: float, density: f
     if exclude_cavities:
         solid = voxelize(_inside(d, solid=True), lo_all, hi_all, h, margin=margin)[0]
         openings = _open_base(solid)
-    tissue = Tissue("heart", mask, h, origin, inl, inlet_names=("LCA", "RCA"), exclusion=solid,
-                    open_boundary=openings)
+    tissue = Tissue("heart", mask, h, origin, inl, inlet_names=("LCA", "RCA"), exclusion=solid, open_boundary=openings)
     return tissue, d
 
 
@@ -284,8 +300,13 @@ def _validate(n_terminals, voxel_size, mass_g, density) -> tuple[float | None, f
     return voxel_size, mass_g, density
 
 
-def heart_dimensions(mass_g: float = DEFAULT_MASS_G, density: float = DEFAULT_DENSITY, *,
-                     n_terminals: int = 1000, voxel_size: float | None = None) -> dict:
+def heart_dimensions(
+    mass_g: float = DEFAULT_MASS_G,
+    density: float = DEFAULT_DENSITY,
+    *,
+    n_terminals: int = 1000,
+    voxel_size: float | None = None,
+) -> dict:
     """The scaled heart geometry [m] and its masses [g].
 
     Keys: the scaled lengths of the module docstring (``lv_outer_radius``,
@@ -303,14 +324,26 @@ def heart_dimensions(mass_g: float = DEFAULT_MASS_G, density: float = DEFAULT_DE
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
     tissue, d = _build(n_terminals, voxel_size, mass_g, density, exclude_cavities=False)
     achieved = tissue.measure * density * 1e3
-    d.update(voxel_size=float(tissue.voxel_size), n_tissue_voxels=tissue.n_tissue_voxels,
-             grid_shape=tissue.shape, mass_g_voxelised=float(achieved), mass_g=float(achieved))
+    d.update(
+        voxel_size=float(tissue.voxel_size),
+        n_tissue_voxels=tissue.n_tissue_voxels,
+        grid_shape=tissue.shape,
+        mass_g_voxelised=float(achieved),
+        mass_g=float(achieved),
+    )
     return d
 
 
-def heart_tissue(n_terminals: int, voxel_size: float | None = None, mass_g: float = DEFAULT_MASS_G,
-                 density: float = DEFAULT_DENSITY, exclude_cavities: bool = True, q_required: float | None = None,
-                 total_flow: float | None = None, **_) -> Tissue:
+def heart_tissue(
+    n_terminals: int,
+    voxel_size: float | None = None,
+    mass_g: float = DEFAULT_MASS_G,
+    density: float = DEFAULT_DENSITY,
+    exclude_cavities: bool = True,
+    q_required: float | None = None,
+    total_flow: float | None = None,
+    **_,
+) -> Tissue:
     """The coronary substrate (LV + RV myocardium) with the LCA and RCA ostia as inlets.
 
     ``voxel_size`` [m] defaults to R_supply / 4 for ``n_terminals`` (with ``q_required``
@@ -324,8 +357,15 @@ def heart_tissue(n_terminals: int, voxel_size: float | None = None, mass_g: floa
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
     tissue, d = _build(n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow)
     achieved = tissue.measure * density * 1e3
-    log.info("heart tissue: %.2f g myocardium as voxelised (target %.2f g, %+.2f%%), %d voxels of %.3g mm, "
-             "grid %s, LV long axis %.1f mm", achieved, mass_g, 100.0 * (achieved / mass_g - 1.0),
-             tissue.n_tissue_voxels, tissue.voxel_size * 1e3, "x".join(map(str, tissue.shape)),
-             d["lv_long_axis"] * 1e3)
+    log.info(
+        "heart tissue: %.2f g myocardium as voxelised (target %.2f g, %+.2f%%), %d voxels of %.3g mm, "
+        "grid %s, LV long axis %.1f mm",
+        achieved,
+        mass_g,
+        100.0 * (achieved / mass_g - 1.0),
+        tissue.n_tissue_voxels,
+        tissue.voxel_size * 1e3,
+        "x".join(map(str, tissue.shape)),
+        d["lv_long_axis"] * 1e3,
+    )
     return tissue

@@ -38,21 +38,45 @@ def ensure_store(job: Job, total_steps: int) -> RunStore:
         store = RunStore.open(job.store)
         store.check_config(job.config)
         return store
-    return RunStore.create(job.store, run_id=job.run_id, seed=job.coords["seed"], config=job.config,
-                           coords=job.coords, total_steps=total_steps)
+    return RunStore.create(
+        job.store,
+        run_id=job.run_id,
+        seed=job.coords["seed"],
+        config=job.config,
+        coords=job.coords,
+        total_steps=total_steps,
+    )
 
 
-def _summary(job: Job, store: RunStore, status: str, resumed_from: int | None, session_steps: int,
-             session_seconds: float, warnings_seen: list[str], cpu_seconds: float = 0.0) -> dict[str, Any]:
+def _summary(
+    job: Job,
+    store: RunStore,
+    status: str,
+    resumed_from: int | None,
+    session_steps: int,
+    session_seconds: float,
+    warnings_seen: list[str],
+    cpu_seconds: float = 0.0,
+) -> dict[str, Any]:
     attrs = store.attrs
     cost = attrs.get("cost") or {}
     recomputed = attrs.get("cost_recomputed") or {}
-    return {"run_id": job.run_id, "cell": job.cell, "seed": job.coords["seed"], "status": status,
-            "resumed_from": resumed_from, "steps_done": int(attrs["steps_done"]),
-            "session_steps": int(session_steps), "session_seconds": float(session_seconds),
-            "session_cpu_seconds": float(cpu_seconds),
-            "wall_seconds": float(attrs["wall_seconds"]), "cost": cost.get("total"),
-            "cost_recomputed": recomputed.get("total"), "store": job.store, "warnings": warnings_seen}
+    return {
+        "run_id": job.run_id,
+        "cell": job.cell,
+        "seed": job.coords["seed"],
+        "status": status,
+        "resumed_from": resumed_from,
+        "steps_done": int(attrs["steps_done"]),
+        "session_steps": int(session_steps),
+        "session_seconds": float(session_seconds),
+        "session_cpu_seconds": float(cpu_seconds),
+        "wall_seconds": float(attrs["wall_seconds"]),
+        "cost": cost.get("total"),
+        "cost_recomputed": recomputed.get("total"),
+        "store": job.store,
+        "warnings": warnings_seen,
+    }
 
 
 def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
@@ -126,31 +150,56 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
             engine.run_block(problem, state, n)
             trace.record(problem, state, n, engine.accepted_moves(state) - before)
             if report is not None:
-                report({"run_id": job.run_id, "cell": job.cell, "step": step + n, "total_steps": total,
-                        "cost": float(trace.rows[-1][-2])})
+                report(
+                    {
+                        "run_id": job.run_id,
+                        "cell": job.cell,
+                        "step": step + n,
+                        "total_steps": total,
+                        "cost": float(trace.rows[-1][-2]),
+                    }
+                )
             if time.perf_counter() - last_checkpoint >= every and step + n < total:
                 trace_length = store.append_trace(trace.arrays(), trace_length)
                 trace = engine.Trace()
-                store.write_checkpoint(engine.state_arrays(state), step=step + n, trace_length=trace_length,
-                                       wall_seconds=wall())
+                store.write_checkpoint(
+                    engine.state_arrays(state), step=step + n, trace_length=trace_length, wall_seconds=wall()
+                )
                 last_checkpoint = time.perf_counter()
 
         trace_length = store.append_trace(trace.arrays(), trace_length)
         report = engine.finish(problem, state)
         tree = engine.tree_of(problem, state)
         store.write_final(
-            parent=tree.parent, position=tree.position, radius=engine.node_radii(tree, problem.physics),
-            kind=tree.kind, physics=problem.physics.as_attrs(), cost=engine.running_costs(problem, state),
+            parent=tree.parent,
+            position=tree.position,
+            radius=engine.node_radii(tree, problem.physics),
+            kind=tree.kind,
+            physics=problem.physics.as_attrs(),
+            cost=engine.running_costs(problem, state),
             cost_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
-            steps_done=int(state.counters[kernel.COUNTER_STEP]), trace_length=trace_length, wall_seconds=wall(),
-            anneal=report, statistics=engine.tree_statistics(problem, tree))
+            steps_done=int(state.counters[kernel.COUNTER_STEP]),
+            trace_length=trace_length,
+            wall_seconds=wall(),
+            anneal=report,
+            statistics=engine.tree_statistics(problem, tree),
+        )
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
-        return _summary(job, store, "complete", resumed_from, session_steps, time.perf_counter() - started, seen,
-                        time.process_time() - cpu_started)
+        return _summary(
+            job,
+            store,
+            "complete",
+            resumed_from,
+            session_steps,
+            time.perf_counter() - started,
+            seen,
+            time.process_time() - cpu_started,
+        )
 
 
-def _run_cco(job: Job, problem: engine.Problem, store: RunStore, started: float, cpu_started: float,
-             report: Reporter | None) -> dict[str, Any]:
+def _run_cco(
+    job: Job, problem: engine.Problem, store: RunStore, started: float, cpu_started: float, report: Reporter | None
+) -> dict[str, Any]:
     """A CCO run (``method=cco``): grow, then write the store as an anneal run writes it.
 
     Growth takes seconds, so there is no checkpoint: an interrupted CCO run starts again
@@ -169,12 +218,21 @@ def _run_cco(job: Job, problem: engine.Problem, store: RunStore, started: float,
     if report is not None:
         report({"run_id": job.run_id, "cell": job.cell, "step": n, "total_steps": n, "cost": result.costs["total"]})
     store.write_final(
-        parent=tree.parent, position=tree.position, radius=engine.node_radii(tree, problem.physics), kind=tree.kind,
-        physics=problem.physics.as_attrs(), cost=result.costs, cost_recomputed=result.costs_recomputed,
-        steps_done=n, trace_length=trace_length, wall_seconds=time.perf_counter() - started,
-        anneal={"method": "cco", "sites_drawn": result.tries, "distance_factor": result.distance_factor})
-    return _summary(job, store, "complete", None, n, time.perf_counter() - started, [],
-                    time.process_time() - cpu_started)
+        parent=tree.parent,
+        position=tree.position,
+        radius=engine.node_radii(tree, problem.physics),
+        kind=tree.kind,
+        physics=problem.physics.as_attrs(),
+        cost=result.costs,
+        cost_recomputed=result.costs_recomputed,
+        steps_done=n,
+        trace_length=trace_length,
+        wall_seconds=time.perf_counter() - started,
+        anneal={"method": "cco", "sites_drawn": result.tries, "distance_factor": result.distance_factor},
+    )
+    return _summary(
+        job, store, "complete", None, n, time.perf_counter() - started, [], time.process_time() - cpu_started
+    )
 
 
 def read_final_tree(path: str | Path) -> dict[str, np.ndarray]:

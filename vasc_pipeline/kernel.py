@@ -26,49 +26,91 @@ import numpy as np
 from ._jit import jit, jit_norc, jit_norc_inline
 from .rng import next_below, next_double
 
-Model = namedtuple("Model", [
-    "n_inlets", "n_terminals",
-    "tables",            # float64 (5, N + 1): volume, power, exclusion, resistance, flow factors by n
-    "mask",              # uint8 (nz, ny, nx)
-    "distance",          # float32 (nz, ny, nx), voxel units
-    "origin",            # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
-    "voxel_size",        # float, m
-    "box_lo", "box_hi",  # float64 (3,) grid box, m
-    "supply_rho",        # float, supply radius in voxel units
-    "w_exclusion", "w_pressure", "w_supply",  # scaled weights A_x / A_wv
-    "supply_on", "exclusion_on", "pressure_on", "move_terminals", "planar",
-    "pressure_inlet", "pressure_terminal",    # Pa
-    "total_steps",       # proposals of the run; the exponential schedule (ends in State.schedule) runs
-                         # from pack_steps to total_steps
-    "pack_steps",        # proposals of the packing phase (vasc_pipeline.packing; 0: none)
-    "pack_T_start", "pack_T_end",  # its temperatures, C_s units
-    "p_swap",            # probability that a proposal is a swap
-    "p_local",           # probability that a swap partner is drawn from the neighbour cells (0: uniform only)
-    "cell_lo", "cell_size", "cell_shape",     # neighbour cell grid: lower corner (m), edge (m), int64 (3,) [x, y, z]
-    "supply_T_start", "supply_T_end", "supply_steps",  # supply's own schedule (C_s units) over the first
-                         # supply_steps proposals; supply_steps = 0: off, the supply weight is w_supply throughout
-    "adapt_steps",       # adapt translation half-widths to keep acceptance near acceptance_target
-    "acceptance_target", "adapt_window", "step_max",  # step_max float64 (2,) m: the configured half-widths
-])
+Model = namedtuple(
+    "Model",
+    [
+        "n_inlets",
+        "n_terminals",
+        "tables",  # float64 (5, N + 1): volume, power, exclusion, resistance, flow factors by n
+        "mask",  # uint8 (nz, ny, nx)
+        "distance",  # float32 (nz, ny, nx), voxel units
+        "origin",  # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
+        "voxel_size",  # float, m
+        "box_lo",
+        "box_hi",  # float64 (3,) grid box, m
+        "supply_rho",  # float, supply radius in voxel units
+        "w_exclusion",
+        "w_pressure",
+        "w_supply",  # scaled weights A_x / A_wv
+        "supply_on",
+        "exclusion_on",
+        "pressure_on",
+        "move_terminals",
+        "planar",
+        "pressure_inlet",
+        "pressure_terminal",  # Pa
+        "total_steps",  # proposals of the run; the exponential schedule (ends in State.schedule) runs
+        # from pack_steps to total_steps
+        "pack_steps",  # proposals of the packing phase (vasc_pipeline.packing; 0: none)
+        "pack_T_start",
+        "pack_T_end",  # its temperatures, C_s units
+        "p_swap",  # probability that a proposal is a swap
+        "p_local",  # probability that a swap partner is drawn from the neighbour cells (0: uniform only)
+        "cell_lo",
+        "cell_size",
+        "cell_shape",  # neighbour cell grid: lower corner (m), edge (m), int64 (3,) [x, y, z]
+        "supply_T_start",
+        "supply_T_end",
+        "supply_steps",  # supply's own schedule (C_s units) over the first
+        # supply_steps proposals; supply_steps = 0: off, the supply weight is w_supply throughout
+        "adapt_steps",  # adapt translation half-widths to keep acceptance near acceptance_target
+        "acceptance_target",
+        "adapt_window",
+        "step_max",  # step_max float64 (2,) m: the configured half-widths
+    ],
+)
 
-State = namedtuple("State", [
-    "parent", "children", "position", "n_downstream",
-    "seg_length",        # float64 (2N,) m
-    "seg_exclusion",     # float64 (2N,) sum_v (D_v L_v)^6 of the segment's centre-line
-    "supply",            # int16 (int32 for N > 32767; engine.supply_dtype) (nz, ny, nx) supply count per tissue voxel, -1 outside tissue
-    "costs", "compensation",  # float64 (5,) running sums and their Neumaier compensation
-    "rng",               # uint64 (4,)
-    "counters",          # int64 (8,) see COUNTER_*
-    "step_size",         # float64 (2,) translation half-width for terminals, bifurcations [m]
-    "schedule",          # float64 (2,) T_start, T_end (configured, or calibrated at step 0)
-    "cell_of", "cell_head", "cell_next", "cell_prev",  # int64: neighbour cell lists of non-inlet nodes
-    "scratch_mark", "scratch_stack", "scratch_pressure",
-])
+State = namedtuple(
+    "State",
+    [
+        "parent",
+        "children",
+        "position",
+        "n_downstream",
+        "seg_length",  # float64 (2N,) m
+        "seg_exclusion",  # float64 (2N,) sum_v (D_v L_v)^6 of the segment's centre-line
+        "supply",  # int16 (int32 for N > 32767; engine.supply_dtype) (nz, ny, nx): supply count per
+        # tissue voxel, -1 outside tissue
+        "costs",
+        "compensation",  # float64 (5,) running sums and their Neumaier compensation
+        "rng",  # uint64 (4,)
+        "counters",  # int64 (8,) see COUNTER_*
+        "step_size",  # float64 (2,) translation half-width for terminals, bifurcations [m]
+        "schedule",  # float64 (2,) T_start, T_end (configured, or calibrated at step 0)
+        "cell_of",
+        "cell_head",
+        "cell_next",
+        "cell_prev",  # int64: neighbour cell lists of non-inlet nodes
+        "scratch_mark",
+        "scratch_stack",
+        "scratch_pressure",
+    ],
+)
 
-(COUNTER_STEP, COUNTER_TERMINAL_PROPOSED, COUNTER_TERMINAL_ACCEPTED, COUNTER_BIFURCATION_PROPOSED,
- COUNTER_BIFURCATION_ACCEPTED, COUNTER_SWAP_PROPOSED, COUNTER_SWAP_ACCEPTED, COUNTER_LOCAL_SWAP_PROPOSED,
- COUNTER_WINDOW_TERMINAL_PROPOSED, COUNTER_WINDOW_TERMINAL_ACCEPTED, COUNTER_WINDOW_BIFURCATION_PROPOSED,
- COUNTER_WINDOW_BIFURCATION_ACCEPTED) = range(12)
+(
+    COUNTER_STEP,
+    COUNTER_TERMINAL_PROPOSED,
+    COUNTER_TERMINAL_ACCEPTED,
+    COUNTER_BIFURCATION_PROPOSED,
+    COUNTER_BIFURCATION_ACCEPTED,
+    COUNTER_SWAP_PROPOSED,
+    COUNTER_SWAP_ACCEPTED,
+    COUNTER_LOCAL_SWAP_PROPOSED,
+    COUNTER_WINDOW_TERMINAL_PROPOSED,
+    COUNTER_WINDOW_TERMINAL_ACCEPTED,
+    COUNTER_WINDOW_BIFURCATION_PROPOSED,
+    COUNTER_WINDOW_BIFURCATION_ACCEPTED,
+) = range(12)
 N_COUNTERS = 12
 
 VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = range(5)
@@ -290,8 +332,9 @@ def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
     """C_s change when voxels lo..hi of row (k, j), except other_lo..other_hi, gain ``sign``."""
     if other_lo > other_hi or other_hi < lo or other_lo > hi:  # nothing to exclude
         return _range_change(supply, k, j, lo, hi, sign, write)
-    return (_range_change(supply, k, j, lo, other_lo - 1, sign, write)
-            + _range_change(supply, k, j, other_hi + 1, hi, sign, write))
+    return _range_change(supply, k, j, lo, other_lo - 1, sign, write) + _range_change(
+        supply, k, j, other_hi + 1, hi, sign, write
+    )
 
 
 @jit_norc
@@ -671,9 +714,11 @@ def _translate_node(model, state, i, new, temp):
         len_c0 = _distance3(pos[c0], new)
         len_c1 = _distance3(pos[c1], new)
         d_vol += tables[T_VOLUME, n0] * (len_c0 - state.seg_length[c0]) + tables[T_VOLUME, n1] * (
-            len_c1 - state.seg_length[c1])
+            len_c1 - state.seg_length[c1]
+        )
         d_pow += tables[T_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[T_POWER, n1] * (
-            len_c1 - state.seg_length[c1])
+            len_c1 - state.seg_length[c1]
+        )
         old_exc += tables[T_EXCLUSION, n0] * state.seg_exclusion[c0] + tables[T_EXCLUSION, n1] * state.seg_exclusion[c1]
     d_sup = 0.0
     if is_terminal and model.supply_on:
@@ -889,9 +934,11 @@ def _swap_nodes(model, state, a, b, temp):
     new_len_a = _distance3(pos[a], pos[pb])
     new_len_b = _distance3(pos[b], pos[pa])
     d_vol += tables[T_VOLUME, na] * (new_len_a - state.seg_length[a]) + tables[T_VOLUME, nb] * (
-        new_len_b - state.seg_length[b])
+        new_len_b - state.seg_length[b]
+    )
     d_pow += tables[T_POWER, na] * (new_len_a - state.seg_length[a]) + tables[T_POWER, nb] * (
-        new_len_b - state.seg_length[b])
+        new_len_b - state.seg_length[b]
+    )
     old_exc = tables[T_EXCLUSION, na] * state.seg_exclusion[a] + tables[T_EXCLUSION, nb] * state.seg_exclusion[b]
     u = -1.0
     if not model.pressure_on:  # skip the traversals when even a zero-exclusion bound fails
@@ -962,8 +1009,11 @@ def scaled_total_without_supply(model, state):
     """
     c = state.costs
     e = state.compensation
-    return ((c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER])) + model.w_exclusion * (c[EXCLUSION] + e[EXCLUSION]) \
+    return (
+        ((c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER]))
+        + model.w_exclusion * (c[EXCLUSION] + e[EXCLUSION])
         + model.w_pressure * (c[PRESSURE] + e[PRESSURE])
+    )
 
 
 @jit

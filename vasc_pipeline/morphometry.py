@@ -50,11 +50,32 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-__all__ = ["KIND_INLET", "KIND_BIFURCATION", "KIND_TERMINAL", "TOP_ORDER", "check_tree_arrays", "children_of",
-           "node_depth", "topological_order", "inlet_of", "select_trees", "segment_lengths", "strahler_orders",
-           "DDSResult", "diameter_defined_strahler", "Elements", "elements", "grouped_statistics",
-           "order_statistics", "Asymmetry", "asymmetry_ratios", "asymmetry_statistics", "shift_orders",
-           "morphometry", "compare_with_kassab"]
+__all__ = [
+    "KIND_INLET",
+    "KIND_BIFURCATION",
+    "KIND_TERMINAL",
+    "TOP_ORDER",
+    "check_tree_arrays",
+    "children_of",
+    "node_depth",
+    "topological_order",
+    "inlet_of",
+    "select_trees",
+    "segment_lengths",
+    "strahler_orders",
+    "DDSResult",
+    "diameter_defined_strahler",
+    "Elements",
+    "elements",
+    "grouped_statistics",
+    "order_statistics",
+    "Asymmetry",
+    "asymmetry_ratios",
+    "asymmetry_statistics",
+    "shift_orders",
+    "morphometry",
+    "compare_with_kassab",
+]
 
 # Same codes as vasc_pipeline.tree; repeated here so this module depends on NumPy alone.
 KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
@@ -75,8 +96,10 @@ def _parent_array(parent) -> np.ndarray:
     bad = (parent < -1) | (parent >= n) | (parent == np.arange(n))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"parent: node {i} has parent {int(parent[i])}; accepted values are -1 (inlet) or another "
-                         f"node index in [0, {n})")
+        raise ValueError(
+            f"parent: node {i} has parent {int(parent[i])}; accepted values are -1 (inlet) or another "
+            f"node index in [0, {n})"
+        )
     return parent
 
 
@@ -200,15 +223,19 @@ def check_tree_arrays(parent, kind, radius=None, position=None) -> None:
     mismatch = (kind == KIND_INLET) != (parent < 0)
     if mismatch.any():
         i = int(np.flatnonzero(mismatch)[0])
-        raise ValueError(f"parent/kind: node {i} has kind {int(kind[i])} and parent {int(parent[i])}; inlets "
-                         f"(kind 0) and only inlets have parent -1")
+        raise ValueError(
+            f"parent/kind: node {i} has kind {int(kind[i])} and parent {int(parent[i])}; inlets "
+            f"(kind 0) and only inlets have parent -1"
+        )
     n_children = np.bincount(parent[parent >= 0], minlength=n)
     expected = np.choose(kind.astype(np.int64), (1, 2, 0))
     bad = n_children != expected
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"parent/kind: node {i} of kind {int(kind[i])} has {int(n_children[i])} children; an "
-                         f"inlet needs 1, a bifurcation 2, a terminal 0")
+        raise ValueError(
+            f"parent/kind: node {i} of kind {int(kind[i])} has {int(n_children[i])} children; an "
+            f"inlet needs 1, a bifurcation 2, a terminal 0"
+        )
     node_depth(parent)  # raises on cycles
     if radius is not None:
         radius = np.asarray(radius, dtype=float)
@@ -353,8 +380,7 @@ class DDSResult(NamedTuple):
     changed: np.ndarray
 
 
-def diameter_defined_strahler(parent, radius, kind, max_iter: int = 100, tol: float = 0.01,
-                              initial=None) -> DDSResult:
+def diameter_defined_strahler(parent, radius, kind, max_iter: int = 100, tol: float = 0.01, initial=None) -> DDSResult:
     """Diameter-defined Strahler orders (Jiang, Kassab & Fung 1994).
 
     Parameters
@@ -531,8 +557,15 @@ def elements(parent, orders, diameter, length) -> Elements:
     el_length = np.bincount(eid, weights=length[seg], minlength=head.size)
     up = parent[head]
     parent_element = np.where(up >= 0, segment_element[np.maximum(up, 0)], -1)
-    return Elements(segment_element, orders[head].copy(), el_diameter, el_length, n_segments.astype(np.int64),
-                    head.astype(np.int64), parent_element)
+    return Elements(
+        segment_element,
+        orders[head].copy(),
+        el_diameter,
+        el_length,
+        n_segments.astype(np.int64),
+        head.astype(np.int64),
+        parent_element,
+    )
 
 
 # --------------------------------------------------------------------------- statistics
@@ -606,8 +639,15 @@ def _order_coord(levels) -> dict:
     return {"order": ("order", np.asarray(levels, dtype=np.int64), {"long_name": "vessel order", "units": "1"})}
 
 
-def order_statistics(element_order, element_diameter, element_length, segment_order=None, segment_diameter=None,
-                     segment_length=None, orders=None) -> xr.Dataset:
+def order_statistics(
+    element_order,
+    element_diameter,
+    element_length,
+    segment_order=None,
+    segment_diameter=None,
+    segment_length=None,
+    orders=None,
+) -> xr.Dataset:
     """Per-order statistics of element (and segment) diameter and length.
 
     Parameters
@@ -628,8 +668,11 @@ def order_statistics(element_order, element_diameter, element_length, segment_or
         ``segment_length_*``, ``segment_count`` and ``segments_per_element`` (Kassab's
         S/E ratio). SD is the sample SD (NaN for a single vessel).
     """
-    levels = _order_range(element_order, *(() if segment_order is None else (segment_order,))) \
-        if orders is None else np.asarray(orders, dtype=np.int64)
+    levels = (
+        _order_range(element_order, *(() if segment_order is None else (segment_order,)))
+        if orders is None
+        else np.asarray(orders, dtype=np.int64)
+    )
     data = {}
     v, count = _stat_vars("element_diameter", "element diameter", element_diameter, element_order, levels, "m")
     data.update(v)
@@ -644,8 +687,7 @@ def order_statistics(element_order, element_diameter, element_length, segment_or
         data["segment_count"] = ("order", seg_count, {"units": "1", "long_name": "number of segments"})
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.where(count > 0, seg_count / np.maximum(count, 1), np.nan)
-        data["segments_per_element"] = ("order", ratio, {"units": "1",
-                                                         "long_name": "segments per element (S/E ratio)"})
+        data["segments_per_element"] = ("order", ratio, {"units": "1", "long_name": "segments per element (S/E ratio)"})
     return xr.Dataset(data, coords=_order_coord(levels))
 
 
@@ -719,22 +761,28 @@ def asymmetry_statistics(asym: Asymmetry, orders=None) -> xr.Dataset:
     """
     levels = _order_range(asym.order) if orders is None else np.asarray(orders, dtype=np.int64)
     data = {}
-    v, count = _stat_vars("diameter_ratio_small", "smaller daughter to parent diameter ratio D_s/D_p", asym.small,
-                          asym.order, levels, "1")
+    v, count = _stat_vars(
+        "diameter_ratio_small", "smaller daughter to parent diameter ratio D_s/D_p", asym.small, asym.order, levels, "1"
+    )
     data.update(v)
-    v, _ = _stat_vars("diameter_ratio_large", "larger daughter to parent diameter ratio D_l/D_p", asym.large,
-                      asym.order, levels, "1")
+    v, _ = _stat_vars(
+        "diameter_ratio_large", "larger daughter to parent diameter ratio D_l/D_p", asym.large, asym.order, levels, "1"
+    )
     data.update(v)
-    data["bifurcation_count"] = ("order", count, {"units": "1",
-                                                  "long_name": "number of bifurcations (by parent order)"})
+    data["bifurcation_count"] = (
+        "order",
+        count,
+        {"units": "1", "long_name": "number of bifurcations (by parent order)"},
+    )
     return xr.Dataset(data, coords=_order_coord(levels))
 
 
 # --------------------------------------------------------------------------- assembly
 
 
-def morphometry(parent, position, radius, kind, *, top: int | None = TOP_ORDER, max_iter: int = 100,
-                tol: float = 0.01) -> xr.Dataset:
+def morphometry(
+    parent, position, radius, kind, *, top: int | None = TOP_ORDER, max_iter: int = 100, tol: float = 0.01
+) -> xr.Dataset:
     """Order-wise morphometry of a tree (or forest) as a labelled dataset.
 
     Parameters
@@ -784,37 +832,61 @@ def morphometry(parent, position, radius, kind, *, top: int | None = TOP_ORDER, 
     for scheme in SCHEMES:
         orders = shifted[scheme]
         el = elements(parent, orders, diameter, length)
-        stats = order_statistics(el.order, el.diameter, el.length, orders[seg], diameter[seg], length[seg],
-                                 orders=levels)
+        stats = order_statistics(
+            el.order, el.diameter, el.length, orders[seg], diameter[seg], length[seg], orders=levels
+        )
         asym = asymmetry_statistics(asymmetry_ratios(parent, radius, kind, orders), orders=levels)
         part = xr.merge([stats, asym])
-        part["order_shift"] = ((), int(orders[seg][0] - raw[scheme][seg][0]) if seg.size else 0,
-                               {"units": "1", "long_name": "shift added to the raw orders (1 = terminal)"})
+        part["order_shift"] = (
+            (),
+            int(orders[seg][0] - raw[scheme][seg][0]) if seg.size else 0,
+            {"units": "1", "long_name": "shift added to the raw orders (1 = terminal)"},
+        )
         part["n_elements"] = ((), int(el.order.size), {"units": "1", "long_name": "number of elements"})
         part["segment_order"] = ("node", orders, {"units": "1", "long_name": "order of the segment ending at the node"})
-        part["element_id"] = ("node", el.segment_element, {"units": "1",
-                                                           "long_name": "element of the segment ending at the node"})
+        part["element_id"] = (
+            "node",
+            el.segment_element,
+            {"units": "1", "long_name": "element of the segment ending at the node"},
+        )
         parts.append(part)
-    ds = xr.concat(parts, dim=xr.DataArray(list(SCHEMES), dims="scheme", name="scheme"),
-                   data_vars="all", coords="minimal", compat="equals", join="outer")
+    ds = xr.concat(
+        parts,
+        dim=xr.DataArray(list(SCHEMES), dims="scheme", name="scheme"),
+        data_vars="all",
+        coords="minimal",
+        compat="equals",
+        join="outer",
+    )
     ds["scheme"].attrs.update(long_name="ordering scheme")
-    ds["order"].attrs.update(long_name="vessel order" + (f" (shifted: highest = {top})" if top is not None else ""),
-                             units="1")
+    ds["order"].attrs.update(
+        long_name="vessel order" + (f" (shifted: highest = {top})" if top is not None else ""), units="1"
+    )
     ds["segment_diameter"] = ("node", diameter, {"units": "m", "long_name": "segment diameter"})
     ds["segment_length"] = ("node", length, {"units": "m", "long_name": "segment length"})
     ds.attrs.update(
-        dds_iterations=int(dds.n_iter), dds_converged=int(bool(dds.converged)), dds_tol=float(tol),
-        dds_changed_fraction=[float(x) for x in dds.changed], n_inlets=int((kind == KIND_INLET).sum()),
-        n_terminals=int((kind == KIND_TERMINAL).sum()), n_segments=int(seg.size),
+        dds_iterations=int(dds.n_iter),
+        dds_converged=int(bool(dds.converged)),
+        dds_tol=float(tol),
+        dds_changed_fraction=[float(x) for x in dds.changed],
+        n_inlets=int((kind == KIND_INLET).sum()),
+        n_terminals=int((kind == KIND_TERMINAL).sum()),
+        n_segments=int(seg.size),
         top_order=-1 if top is None else int(top),
         ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment (see vasc_pipeline.morphometry); "
-                 "strahler: conventional Strahler",
+        "strahler: conventional Strahler",
     )
     return ds
 
 
-def compare_with_kassab(ds: xr.Dataset, artery: str, *, scheme: str = "diameter_defined", level: str = "element",
-                        reference: xr.Dataset | None = None) -> pd.DataFrame:
+def compare_with_kassab(
+    ds: xr.Dataset,
+    artery: str,
+    *,
+    scheme: str = "diameter_defined",
+    level: str = "element",
+    reference: xr.Dataset | None = None,
+) -> pd.DataFrame:
     """Model against Kassab 1993: mean diameter and length per order.
 
     Parameters
@@ -852,14 +924,21 @@ def compare_with_kassab(ds: xr.Dataset, artery: str, *, scheme: str = "diameter_
             raise ValueError(f"scheme: {scheme!r} is not one of {list(ds.scheme.values)}")
         ds = ds.sel(scheme=scheme)
     ref = reference.sel(artery=artery, level=level)
-    model = pd.DataFrame({
-        "model_diameter": ds[f"{level}_diameter_mean"].to_series(),
-        "model_length": ds[f"{level}_length_mean"].to_series(),
-        "model_count": ds[f"{level}_count"].to_series(),
-    })
+    model = pd.DataFrame(
+        {
+            "model_diameter": ds[f"{level}_diameter_mean"].to_series(),
+            "model_length": ds[f"{level}_length_mean"].to_series(),
+            "model_count": ds[f"{level}_count"].to_series(),
+        }
+    )
     model = model[model.model_count > 0]
-    kassab = pd.DataFrame({"kassab_diameter": ref.D_mean.to_series(), "kassab_length": ref.L_mean.to_series(),
-                           "kassab_count": ref.D_n.to_series()})
+    kassab = pd.DataFrame(
+        {
+            "kassab_diameter": ref.D_mean.to_series(),
+            "kassab_length": ref.L_mean.to_series(),
+            "kassab_count": ref.D_n.to_series(),
+        }
+    )
     kassab = kassab[kassab.kassab_count > 0]
     table = model.join(kassab, how="outer").sort_index()
     table.index = table.index.astype(np.int64)
@@ -869,12 +948,28 @@ def compare_with_kassab(ds: xr.Dataset, artery: str, *, scheme: str = "diameter_
     with np.errstate(divide="ignore", invalid="ignore"):
         table["diameter_log10_ratio"] = np.log10(table.model_diameter / table.kassab_diameter)
         table["length_log10_ratio"] = np.log10(table.model_length / table.kassab_length)
-    table = table[["model_diameter", "kassab_diameter", "diameter_log10_ratio", "model_length", "kassab_length",
-                   "length_log10_ratio", "model_count", "kassab_count"]]
+    table = table[
+        [
+            "model_diameter",
+            "kassab_diameter",
+            "diameter_log10_ratio",
+            "model_length",
+            "kassab_length",
+            "length_log10_ratio",
+            "model_count",
+            "kassab_count",
+        ]
+    ]
     both = (table.model_count > 0) & (table.kassab_count > 0)
     mad = float(table.diameter_log10_ratio[both].abs().mean()) if both.any() else float("nan")
     mal = float(table.length_log10_ratio[both].abs().mean()) if both.any() else float("nan")
-    table.attrs.update(mean_abs_log10_ratio_diameter=mad, mean_abs_log10_ratio_length=mal,
-                       mean_abs_log10_ratio=(mad + mal) / 2, n_orders_compared=int(both.sum()), artery=artery,
-                       scheme=scheme, level=level)
+    table.attrs.update(
+        mean_abs_log10_ratio_diameter=mad,
+        mean_abs_log10_ratio_length=mal,
+        mean_abs_log10_ratio=(mad + mal) / 2,
+        n_orders_compared=int(both.sum()),
+        artery=artery,
+        scheme=scheme,
+        level=level,
+    )
     return table

@@ -40,14 +40,39 @@ from typing import Any, Iterator, TextIO
 
 from . import config as _config
 from .config import ClusterConfig, ConfigError, RunConfig
-from .store import (STATUS_COMPLETE, RUNS_DIR, SWEEP_AXES, RunStore, StoreError, identity_differences,
-                    is_empty_leftover, verify_store)
+from .store import (
+    RUNS_DIR,
+    STATUS_COMPLETE,
+    SWEEP_AXES,
+    RunStore,
+    StoreError,
+    identity_differences,
+    is_empty_leftover,
+    verify_store,
+)
 from .sweep import Job, cell_id, expand
 
-__all__ = ["main", "run_sweep", "reduce_stage", "plan", "Plan", "output_dir_lock", "OutputDirLocked", "open_client", "check_cluster",
-           "check_output_dir", "OutputDirCallback", "SweepStartError", "inspect_stores", "check_one_configuration",
-           "slurm_cluster", "has_bokeh",
-           "compile_kernels", "LOCK_NAME", "PROGRESS_TOPIC"]
+__all__ = [
+    "main",
+    "run_sweep",
+    "reduce_stage",
+    "plan",
+    "Plan",
+    "output_dir_lock",
+    "OutputDirLocked",
+    "open_client",
+    "check_cluster",
+    "check_output_dir",
+    "OutputDirCallback",
+    "SweepStartError",
+    "inspect_stores",
+    "check_one_configuration",
+    "slurm_cluster",
+    "has_bokeh",
+    "compile_kernels",
+    "LOCK_NAME",
+    "PROGRESS_TOPIC",
+]
 
 LOCK_NAME = ".vasc_pipeline.lock"
 PROGRESS_TOPIC = "vasc_pipeline.progress"
@@ -72,8 +97,8 @@ class Plan:
 
     config: RunConfig
     jobs: list[Job]
-    total_steps: dict[str, int]                         # run_id -> proposed moves of the run
-    complete: set[str] = field(default_factory=set)     # run ids whose store is complete
+    total_steps: dict[str, int]  # run_id -> proposed moves of the run
+    complete: set[str] = field(default_factory=set)  # run ids whose store is complete
     started: dict[str, int] = field(default_factory=dict)  # run_id -> committed steps of unfinished stores
     damaged: dict[str, str] = field(default_factory=dict)  # run_id -> what is wrong with its store (left out)
 
@@ -133,9 +158,10 @@ def check_one_configuration(p: Plan) -> None:
     """Refuse a sweep whose runs would share an output_dir with runs of another configuration.
 
     Every store of an output_dir shares the configuration except the sweep axes
-    (``store.SWEEP_AXES``; runs of another method share what both methods use), and the runs of one cell (grid point without the seed) share their
-    number of proposed moves: otherwise the reduction's best seed of a cell would be picked
-    across different physics or schedules. Unreadable stores are skipped here (see
+    (``store.SWEEP_AXES``; runs of another method share what both methods use), and the runs
+    of one cell (grid point without the seed) share their number of proposed moves: otherwise
+    the reduction's best seed of a cell would be picked across different physics or
+    schedules. Unreadable stores are skipped here (see
     :func:`inspect_stores` and the reduction, which name them).
     """
     first = p.jobs[0]
@@ -149,20 +175,28 @@ def check_one_configuration(p: Plan) -> None:
         diff = identity_differences(attrs.get("config") or {}, first.config)
         coords = attrs.get("coords") or {}
         try:
-            cell = cell_id(coords["tissue"], coords["n_terminals"], coords["m_b"], coords.get("steps"),
-                           coords.get("method") or "anneal")
+            cell = cell_id(
+                coords["tissue"],
+                coords["n_terminals"],
+                coords["m_b"],
+                coords.get("steps"),
+                coords.get("method") or "anneal",
+            )
         except (KeyError, TypeError, ValueError):
             cell = None
         if cell in cell_steps and int(attrs.get("total_steps", -1)) != cell_steps[cell]:
-            diff.append(f"proposed moves of cell {cell}: {attrs.get('total_steps')} (stored) vs "
-                        f"{cell_steps[cell]} (requested; anneal.steps)")
+            diff.append(
+                f"proposed moves of cell {cell}: {attrs.get('total_steps')} (stored) vs "
+                f"{cell_steps[cell]} (requested; anneal.steps)"
+            )
         if diff:
             raise ConfigError(
                 f"output_dir {str(p.output_dir)!r} holds runs of another configuration, and runs are never mixed: "
                 f"{path.name} differs in {'; '.join(diff)}. Every run in one output_dir shares its configuration "
                 f"except the sweep axes ({', '.join(SWEEP_AXES)}), and the runs of one cell share their "
                 "anneal.steps. Restore those settings, or choose a new output_dir (output_dir=...) for the "
-                "changed configuration.")
+                "changed configuration."
+            )
 
 
 def create_stores(p: Plan) -> None:
@@ -171,8 +205,14 @@ def create_stores(p: Plan) -> None:
         if is_empty_leftover(j.store):  # a crash between mkdir and the store's zarr.json
             Path(j.store).rmdir()
         if not RunStore.exists(j.store):
-            RunStore.create(j.store, run_id=j.run_id, seed=j.coords["seed"], config=j.config, coords=j.coords,
-                            total_steps=p.total_steps[j.run_id])
+            RunStore.create(
+                j.store,
+                run_id=j.run_id,
+                seed=j.coords["seed"],
+                config=j.config,
+                coords=j.coords,
+                total_steps=p.total_steps[j.run_id],
+            )
 
 
 # --------------------------------------------------------------------------------------------
@@ -193,8 +233,10 @@ def output_dir_lock(output_dir: str | os.PathLike) -> Iterator[Path]:
         (out / RUNS_DIR).mkdir(exist_ok=True)
         fh = open(out / LOCK_NAME, "a+")
     except OSError as exc:
-        raise OSError(f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-                      "writable directory with output_dir=...") from exc
+        raise OSError(
+            f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
+            "writable directory with output_dir=..."
+        ) from exc
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -208,11 +250,20 @@ def output_dir_lock(output_dir: str | os.PathLike) -> Iterator[Path]:
                 f"output_dir {str(out)!r} is in use by another sweep (pid {holder.get('pid', '?')} on "
                 f"{holder.get('host', '?')}, started {holder.get('started', '?')}). Two sweeps never write "
                 "into one output_dir at once: wait for that one to finish (or stop it; rerunning the same "
-                "command resumes it), or choose another output_dir=...") from None
+                "command resumes it), or choose another output_dir=..."
+            ) from None
         fh.seek(0)
         fh.truncate()
-        fh.write(json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
-                             "started": time.strftime("%Y-%m-%d %H:%M:%S"), "argv": sys.argv}))
+        fh.write(
+            json.dumps(
+                {
+                    "pid": os.getpid(),
+                    "host": socket.gethostname(),
+                    "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+                    "argv": sys.argv,
+                }
+            )
+        )
         fh.flush()
         yield out
     finally:
@@ -228,8 +279,10 @@ def check_output_dir(output_dir: str | os.PathLike) -> Path:
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        raise OSError(f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-                      "writable directory with output_dir=...") from exc
+        raise OSError(
+            f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
+            "writable directory with output_dir=..."
+        ) from exc
     return out
 
 
@@ -248,8 +301,10 @@ class OutputDirCallback:
                 raise OSError("output_dir is empty: give the directory for the results with output_dir=...")
             if config.get("stage") == "reduce":
                 if not (Path(config.output_dir) / RUNS_DIR).is_dir():
-                    raise OSError(f"output_dir {str(config.output_dir)!r} holds no runs/ directory: nothing to "
-                                  "reduce. Give the output_dir of a sweep (output_dir=...)")
+                    raise OSError(
+                        f"output_dir {str(config.output_dir)!r} holds no runs/ directory: nothing to "
+                        "reduce. Give the output_dir of a sweep (output_dir=...)"
+                    )
             else:
                 check_output_dir(config.output_dir)
         except OSError as exc:
@@ -290,8 +345,10 @@ def _security(cluster: ClusterConfig, server: bool):
     if not (tls.ca_file or tls.cert or tls.key or tls.require_encryption):
         return None
     if not (tls.ca_file and tls.cert):
-        raise ConfigError("cluster.tls needs both cluster.tls.ca_file and cluster.tls.cert (PEM files; "
-                          f"cluster.tls.key if the key is separate), got ca_file={tls.ca_file!r} cert={tls.cert!r}")
+        raise ConfigError(
+            "cluster.tls needs both cluster.tls.ca_file and cluster.tls.cert (PEM files; "
+            f"cluster.tls.key if the key is separate), got ca_file={tls.ca_file!r} cert={tls.cert!r}"
+        )
     for name in ("ca_file", "cert", "key"):
         path = getattr(tls, name)
         if path and not Path(path).is_file():
@@ -300,8 +357,9 @@ def _security(cluster: ClusterConfig, server: bool):
 
     kwargs = {"tls_ca_file": tls.ca_file, "tls_client_cert": tls.cert, "tls_client_key": tls.key}
     if server:
-        kwargs.update(tls_scheduler_cert=tls.cert, tls_scheduler_key=tls.key, tls_worker_cert=tls.cert,
-                      tls_worker_key=tls.key)
+        kwargs.update(
+            tls_scheduler_cert=tls.cert, tls_scheduler_key=tls.key, tls_worker_cert=tls.cert, tls_worker_key=tls.key
+        )
     return Security(require_encryption=bool(tls.require_encryption), **kwargs)
 
 
@@ -323,26 +381,32 @@ def check_cluster(cluster: ClusterConfig) -> None:
     if cluster.retries < 0:
         raise ConfigError(f"cluster.retries must be an integer >= 0, got {cluster.retries}")
     if cluster.name == "address" and not cluster.address:
-        raise ConfigError("cluster.address is required for cluster=address: the scheduler's tcp://host:8786 "
-                          "(or tls://host:8786)")
+        raise ConfigError(
+            "cluster.address is required for cluster=address: the scheduler's tcp://host:8786 (or tls://host:8786)"
+        )
     if cluster.address and "://" not in cluster.address:
         raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {cluster.address!r}")
     if cluster.name == "slurm" and cluster.slurm.cores < 1:
         raise ConfigError(f"cluster.slurm.cores must be an integer >= 1, got {cluster.slurm.cores}")
     if not (cluster.startup_timeout > 0 and math.isfinite(cluster.startup_timeout)):
-        raise ConfigError(f"cluster.startup_timeout must be a finite number of seconds > 0, got "
-                          f"{cluster.startup_timeout}")
+        raise ConfigError(
+            f"cluster.startup_timeout must be a finite number of seconds > 0, got {cluster.startup_timeout}"
+        )
     tls = _security(cluster, server=cluster.name == "slurm")
     if cluster.name == "slurm":  # what SLURM needs, before any store is created
         if importlib.util.find_spec("dask_jobqueue") is None:
             raise ConfigError("cluster=slurm needs dask-jobqueue: pip install 'vasc_pipeline[slurm]'")
         if tls is None and not cluster.allow_insecure and importlib.util.find_spec("cryptography") is None:
-            raise ConfigError("cluster=slurm encrypts the scheduler's connections with temporary TLS certificates, "
-                              "which need the cryptography package: pip install 'vasc_pipeline[slurm]' (or give "
-                              "cluster.tls.* PEM files, or cluster.allow_insecure=true on a trusted network)")
+            raise ConfigError(
+                "cluster=slurm encrypts the scheduler's connections with temporary TLS certificates, "
+                "which need the cryptography package: pip install 'vasc_pipeline[slurm]' (or give "
+                "cluster.tls.* PEM files, or cluster.allow_insecure=true on a trusted network)"
+            )
         if not cluster.dry_run and shutil.which("sbatch") is None:
-            raise ConfigError("cluster=slurm submits jobs with sbatch, which is not on PATH here: run the sweep on "
-                              "a SLURM login node (cluster.dry_run=true prints the job script without submitting)")
+            raise ConfigError(
+                "cluster=slurm submits jobs with sbatch, which is not on PATH here: run the sweep on "
+                "a SLURM login node (cluster.dry_run=true prints the job script without submitting)"
+            )
 
 
 def has_bokeh() -> bool:
@@ -386,8 +450,9 @@ _WORKER_CONFIG = {
     "distributed.worker.memory.monitor-interval": "1s",
 }
 # The same for SLURM workers, which read their config on the compute node.
-_WORKER_ENV = [f"export DASK_{key.upper().replace('.', '__').replace('-', '_')}={value}"
-               for key, value in _WORKER_CONFIG.items()]
+_WORKER_ENV = [
+    f"export DASK_{key.upper().replace('.', '__').replace('-', '_')}={value}" for key, value in _WORKER_CONFIG.items()
+]
 
 
 def _dashboard_options(cluster: ClusterConfig) -> dict:
@@ -412,12 +477,22 @@ def slurm_cluster(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.Path
     if security is None and not cluster.allow_insecure:
         security = Security.temporary()  # the scheduler listens beyond loopback: never in clear by default
     cl = SLURMCluster(
-        queue=s.queue, account=s.account, walltime=s.walltime, cores=s.cores, processes=s.cores,
-        memory=s.memory, interface=s.interface, local_directory=s.local_directory,
-        log_directory=s.log_directory, job_extra_directives=list(s.job_extra_directives),
-        job_script_prologue=[*s.job_script_prologue, *_WORKER_ENV], security=security,
-        protocol="tls://" if security else None, scheduler_options=_dashboard_options(cluster),
-        shared_temp_directory=str(Path(output_dir).resolve()) if output_dir is not None else None)
+        queue=s.queue,
+        account=s.account,
+        walltime=s.walltime,
+        cores=s.cores,
+        processes=s.cores,
+        memory=s.memory,
+        interface=s.interface,
+        local_directory=s.local_directory,
+        log_directory=s.log_directory,
+        job_extra_directives=list(s.job_extra_directives),
+        job_script_prologue=[*s.job_script_prologue, *_WORKER_ENV],
+        security=security,
+        protocol="tls://" if security else None,
+        scheduler_options=_dashboard_options(cluster),
+        shared_temp_directory=str(Path(output_dir).resolve()) if output_dir is not None else None,
+    )
     return cl
 
 
@@ -429,8 +504,13 @@ def _client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLike |
     # A task whose worker dies is rescheduled up to allowed-failures times (scheduler side;
     # an existing scheduler keeps its own setting). Workers started here inherit the config.
     # Work stealing rebalances short tasks every 100 ms; ours run for minutes to days.
-    with dask.config.set({"distributed.scheduler.allowed-failures": int(cluster.retries),
-                          "distributed.scheduler.work-stealing": False, **_WORKER_CONFIG}):
+    with dask.config.set(
+        {
+            "distributed.scheduler.allowed-failures": int(cluster.retries),
+            "distributed.scheduler.work-stealing": False,
+            **_WORKER_CONFIG,
+        }
+    ):
         if cluster.address:
             client = Client(cluster.address, security=_security(cluster, server=False), timeout="30s")
             try:
@@ -443,9 +523,14 @@ def _client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLike |
             cl.scale(n=cluster.n_workers or n_jobs)
         else:
             n = cluster.n_workers or max(1, min(_cores(), n_jobs))
-            cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                              dashboard_address=cluster.dashboard_address if has_bokeh() else None,
-                              silence_logs=logging.ERROR)
+            cl = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=cluster.dashboard_address if has_bokeh() else None,
+                silence_logs=logging.ERROR,
+            )
         try:
             client = Client(cl)
             try:
@@ -483,8 +568,12 @@ def _dask_run_job(job: Job) -> dict:
     except Exception as exc:
         # A run is a pure function of (config, seed): any other exception recurs on every retry,
         # so it is returned, not raised (Dask would retry it cluster.retries times).
-        return {"run_id": job.run_id, "status": "failed", "deterministic": True,
-                "error": f"{type(exc).__name__}: {exc}"}
+        return {
+            "run_id": job.run_id,
+            "status": "failed",
+            "deterministic": True,
+            "error": f"{type(exc).__name__}: {exc}",
+        }
 
 
 def _runs(n: int) -> str:
@@ -508,8 +597,9 @@ class Progress:
         self.total_runs = len(jobs)
         self.totals = {j.run_id: p.total_steps[j.run_id] for j in jobs}
         self.cells = {j.run_id: j.cell for j in jobs}
-        self.steps = {j.run_id: (self.totals[j.run_id] if j.run_id in p.complete else p.started.get(j.run_id, 0))
-                      for j in jobs}
+        self.steps = {
+            j.run_id: (self.totals[j.run_id] if j.run_id in p.complete else p.started.get(j.run_id, 0)) for j in jobs
+        }
         self.steps_at_start = sum(self.steps.values())
         self.best: dict[str, float] = {}
         self.done = len(p.complete)
@@ -550,8 +640,7 @@ class Progress:
         if summary["status"] == "skipped":
             how = "already complete"
         cost = "?" if summary.get("cost") is None else f"{summary['cost']:.6g}"
-        self._write(f"[{self.done}/{self.total_runs}] {summary['run_id']} complete ({how}), cost {cost}",
-                    newline=True)
+        self._write(f"[{self.done}/{self.total_runs}] {summary['run_id']} complete ({how}), cost {cost}", newline=True)
         for text in summary.get("warnings", ()):  # checkpoint fallbacks happen on the worker: say so here
             self._write(f"    warning: {text}", newline=True)
 
@@ -569,8 +658,10 @@ class Progress:
             best = ", ".join(f"{c} {v:.4g}" for c, v in sorted(self.best.items()))
             done = self.done
         eta = remaining / rate if rate > 0 else math.inf
-        return (f"runs {done}/{self.total_runs} | {rate:.3g} steps/s | ETA {_duration(eta)} | "
-                f"best cost per cell: {best or '-'}")
+        return (
+            f"runs {done}/{self.total_runs} | {rate:.3g} steps/s | ETA {_duration(eta)} | "
+            f"best cost per cell: {best or '-'}"
+        )
 
     def tick(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -606,8 +697,14 @@ def _terminal_width() -> int:
 # The sweep
 
 
-def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
-              progress_interval: float | None = None, reduce: bool = True) -> dict[str, Any]:
+def run_sweep(
+    cfg: Any,
+    client: Any = None,
+    *,
+    stream: TextIO | None = None,
+    progress_interval: float | None = None,
+    reduce: bool = True,
+) -> dict[str, Any]:
     """Run every unfinished job of the sweep (or single run) described by ``cfg``.
 
     Parameters
@@ -653,14 +750,24 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
         inspect_stores(p)
         create_stores(p)
         pending = p.pending
-        stream.write(f"vasc_pipeline: {name}: {_runs(len(p.jobs))} into {p.output_dir} ({len(p.complete)} already "
-                     f"complete, {len(p.started)} to resume, {len(pending) - len(p.started)} new"
-                     + (f", {len(p.damaged)} left out: damaged store" if p.damaged else "") + ")\n")
+        stream.write(
+            f"vasc_pipeline: {name}: {_runs(len(p.jobs))} into {p.output_dir} ({len(p.complete)} already "
+            f"complete, {len(p.started)} to resume, {len(pending) - len(p.started)} new"
+            + (f", {len(p.damaged)} left out: damaged store" if p.damaged else "")
+            + ")\n"
+        )
         for run_id, why in p.damaged.items():
             stream.write(f"  left out: {run_id}: {why}\n")
-        result: dict[str, Any] = {"output_dir": str(p.output_dir), "runs": [], "complete": [], "resumed": [],
-                                  "skipped": sorted(p.complete), "failed": {}, "deterministic": set(),
-                                  "damaged": dict(p.damaged)}
+        result: dict[str, Any] = {
+            "output_dir": str(p.output_dir),
+            "runs": [],
+            "complete": [],
+            "resumed": [],
+            "skipped": sorted(p.complete),
+            "failed": {},
+            "deterministic": set(),
+            "damaged": dict(p.damaged),
+        }
         if pending:
             compile_kernels()
             with contextlib.ExitStack() as stack:
@@ -668,25 +775,39 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
                     client = stack.enter_context(open_client(cfg.cluster, len(pending), p.output_dir))
                 _wait_for_workers(client, cfg.cluster, len(pending))
                 # An existing scheduler draws its own dashboard; ours only with bokeh here.
-                dashboard = getattr(client, "dashboard_link", None) if cfg.cluster.address or (
-                    cfg.cluster.dashboard_address and has_bokeh()) else None
+                dashboard = (
+                    getattr(client, "dashboard_link", None)
+                    if cfg.cluster.address or (cfg.cluster.dashboard_address and has_bokeh())
+                    else None
+                )
                 progress = Progress(p, stream, progress_interval, dashboard)
                 if dashboard:
                     stream.write(f"vasc_pipeline: Dask dashboard at {dashboard}\n")
                 elif cfg.cluster.dashboard_address and not cfg.cluster.address:
-                    stream.write("vasc_pipeline: no Dask dashboard: it needs bokeh (pip install 'bokeh>=3.1'); "
-                                 "progress is printed here\n")
+                    stream.write(
+                        "vasc_pipeline: no Dask dashboard: it needs bokeh (pip install 'bokeh>=3.1'); "
+                        "progress is printed here\n"
+                    )
                 client.subscribe_topic(PROGRESS_TOPIC, progress.event)
                 try:
                     # Keys name the run (dashboard, logs) and this sweep, so that a client reused
                     # for a second sweep never hands back a finished task of the first.
                     token = uuid.uuid4().hex[:8]
                     try:
-                        futures = {client.submit(_dask_run_job, j, key=f"vasc-run-{j.run_id}-{token}", pure=False,
-                                                 retries=cfg.cluster.retries): j for j in pending}
+                        futures = {
+                            client.submit(
+                                _dask_run_job,
+                                j,
+                                key=f"vasc-run-{j.run_id}-{token}",
+                                pure=False,
+                                retries=cfg.cluster.retries,
+                            ): j
+                            for j in pending
+                        }
                     except Exception as exc:  # e.g. a job Dask cannot serialise: it would never start
-                        raise SweepStartError(f"the jobs could not be submitted to the Dask scheduler "
-                                              f"({type(exc).__name__}: {exc})") from exc
+                        raise SweepStartError(
+                            f"the jobs could not be submitted to the Dask scheduler ({type(exc).__name__}: {exc})"
+                        ) from exc
                     remaining = set(futures)
                     deadline = time.monotonic() + cfg.cluster.startup_timeout
                     running = False
@@ -700,7 +821,8 @@ def run_sweep(cfg: Any, client: Any = None, *, stream: TextIO | None = None,
                             raise SweepStartError(
                                 f"none of the {_runs(len(futures))} started within cluster.startup_timeout="
                                 f"{cfg.cluster.startup_timeout:g} s: no worker began one (waited for a worker free to "
-                                "take a job; see any Dask error above)")
+                                "take a job; see any Dask error above)"
+                            )
                         progress.tick()
                 finally:
                     client.unsubscribe_topic(PROGRESS_TOPIC)
@@ -721,15 +843,21 @@ def _wait_for_workers(client: Any, cluster: ClusterConfig, n_jobs: int) -> None:
     except (TimeoutError, OSError):
         pass
     if cluster.name == "slurm":
-        what = (f"the workers of {cluster.n_workers or n_jobs} requested SLURM worker(s) (squeue -u $USER shows "
-                "whether the jobs are queued; their logs go to cluster.slurm.log_directory)")
+        what = (
+            f"the workers of {cluster.n_workers or n_jobs} requested SLURM worker(s) (squeue -u $USER shows "
+            "whether the jobs are queued; their logs go to cluster.slurm.log_directory)"
+        )
     elif cluster.address:
-        what = (f"a worker of the scheduler at {cluster.address} (start one with: dask worker {cluster.address} "
-                "--nthreads 1)")
+        what = (
+            f"a worker of the scheduler at {cluster.address} (start one with: dask worker {cluster.address} "
+            "--nthreads 1)"
+        )
     else:
         what = "the local cluster's worker processes"
-    raise SweepStartError(f"no Dask worker started within cluster.startup_timeout={cluster.startup_timeout:g} s; "
-                          f"waited for {what}. Raise cluster.startup_timeout if they are merely slow to start")
+    raise SweepStartError(
+        f"no Dask worker started within cluster.startup_timeout={cluster.startup_timeout:g} s; "
+        f"waited for {what}. Raise cluster.startup_timeout if they are merely slow to start"
+    )
 
 
 def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
@@ -737,23 +865,43 @@ def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
     inspect_stores(p)  # read-only: what a sweep would skip, resume or refuse
     lines = [f"vasc_pipeline: dry run: {_runs(len(p.pending))} of {len(p.jobs)} would run into {p.output_dir}:"]
     for j in p.jobs:
-        what = ("complete: skipped" if j.run_id in p.complete else f"left out: {p.damaged[j.run_id]}"
-                if j.run_id in p.damaged else f"resumes from step {p.started[j.run_id]}" if j.run_id in p.started
-                else "new")
+        what = (
+            "complete: skipped"
+            if j.run_id in p.complete
+            else f"left out: {p.damaged[j.run_id]}"
+            if j.run_id in p.damaged
+            else f"resumes from step {p.started[j.run_id]}"
+            if j.run_id in p.started
+            else "new"
+        )
         lines.append(f"  {j.run_id} ({p.total_steps[j.run_id]} proposed moves; {what})")
     if cfg.cluster.name == "slurm":
         with _quiet_dask():
             cl = slurm_cluster(cfg.cluster, len(p.jobs), check_output_dir(p.output_dir))
             try:
-                lines += ["SLURM job script (one per cluster.slurm.cores workers; not submitted; temporary TLS files it "
-                          "names exist only while a sweep runs):", cl.job_script()]
+                lines += [
+                    "SLURM job script (one per cluster.slurm.cores workers; not submitted; temporary TLS files it "
+                    "names exist only while a sweep runs):",
+                    cl.job_script(),
+                ]
             finally:
                 cl.close()
     stream.write("\n".join(lines) + "\n")
     stream.flush()
-    return {"output_dir": str(p.output_dir), "runs": [], "complete": [], "resumed": [], "skipped": [],
-            "failed": {}, "deterministic": set(), "damaged": {}, "wall_seconds": 0.0, "reduction": None,
-            "reduction_error": None, "dry_run": True}
+    return {
+        "output_dir": str(p.output_dir),
+        "runs": [],
+        "complete": [],
+        "resumed": [],
+        "skipped": [],
+        "failed": {},
+        "deterministic": set(),
+        "damaged": {},
+        "wall_seconds": 0.0,
+        "reduction": None,
+        "reduction_error": None,
+        "dry_run": True,
+    }
 
 
 def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | None]:
@@ -764,8 +912,10 @@ def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | No
         return reduce(output_dir, stream=stream), None
     except Exception as exc:
         error = f"{type(exc).__name__}: {exc}"
-        stream.write(f"vasc_pipeline: reduction FAILED ({error}). Every run is stored; retry with "
-                     f"python -m vasc_pipeline +stage=reduce output_dir={output_dir}\n")
+        stream.write(
+            f"vasc_pipeline: reduction FAILED ({error}). Every run is stored; retry with "
+            f"python -m vasc_pipeline +stage=reduce output_dir={output_dir}\n"
+        )
         stream.flush()
         return None, error
 
@@ -777,8 +927,10 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
     stream = stream or sys.stderr
     output_dir = Path(cfg.output_dir)
     if not (output_dir / RUNS_DIR).is_dir():
-        stream.write(f"vasc_pipeline: error: output_dir {str(output_dir)!r} holds no runs/ directory: nothing to "
-                     "reduce. Give the output_dir of a sweep (output_dir=...).\n")
+        stream.write(
+            f"vasc_pipeline: error: output_dir {str(output_dir)!r} holds no runs/ directory: nothing to "
+            "reduce. Give the output_dir of a sweep (output_dir=...).\n"
+        )
         return 2
     try:
         reduction = reduce(output_dir, stream=stream)
@@ -823,24 +975,33 @@ def _collect(fut: Any, job: Job, progress: Progress, result: dict) -> None:
 
 def _print_summary(result: dict, p: Plan, stream: TextIO) -> None:
     n_failed = len(result["failed"])
-    lines = [f"vasc_pipeline: finished in {_duration(result['wall_seconds'])}: {_runs(len(p.jobs))}: "
-             f"{len(result['complete'])} completed now ({len(result['resumed'])} resumed from a checkpoint), "
-             f"{len(result['skipped'])} already complete, {n_failed} failed"
-             + (f", {len(result['damaged'])} left out (damaged store)" if result.get("damaged") else "") + "."]
+    lines = [
+        f"vasc_pipeline: finished in {_duration(result['wall_seconds'])}: {_runs(len(p.jobs))}: "
+        f"{len(result['complete'])} completed now ({len(result['resumed'])} resumed from a checkpoint), "
+        f"{len(result['skipped'])} already complete, {n_failed} failed"
+        + (f", {len(result['damaged'])} left out (damaged store)" if result.get("damaged") else "")
+        + "."
+    ]
     deterministic = result.get("deterministic", set())
     for run_id, error in result["failed"].items():
         lines.append(f"  failed: {run_id}: {error}")
     if deterministic:
-        lines.append(f"  {_runs(len(deterministic))} failed deterministically ({', '.join(sorted(deterministic))}): a run "
-                     "is a pure function of its configuration and seed, so rerunning fails the same way. Change the "
-                     "configuration (the error above says what failed) or report it as a bug.")
+        lines.append(
+            f"  {_runs(len(deterministic))} failed deterministically ({', '.join(sorted(deterministic))}): a run "
+            "is a pure function of its configuration and seed, so rerunning fails the same way. Change the "
+            "configuration (the error above says what failed) or report it as a bug."
+        )
     if n_failed > len(deterministic):
-        lines.append(f"  Rerun the same command to retry the {'other ' if deterministic else ''}failed runs (finished "
-                     "runs are skipped; the others resume from their last checkpoint).")
+        lines.append(
+            f"  Rerun the same command to retry the {'other ' if deterministic else ''}failed runs (finished "
+            "runs are skipped; the others resume from their last checkpoint)."
+        )
     for run_id, why in result.get("damaged", {}).items():
         lines.append(f"  left out: {run_id}: {why}")
-    lines.append(f"Results: {p.output_dir / RUNS_DIR}/<run_id>.zarr (xarray.open_zarr(path, group='trace'); "
-                 "tree/ and tissue/ groups; attrs cost, cost_recomputed, config)")
+    lines.append(
+        f"Results: {p.output_dir / RUNS_DIR}/<run_id>.zarr (xarray.open_zarr(path, group='trace'); "
+        "tree/ and tissue/ groups; attrs cost, cost_recomputed, config)"
+    )
     stream.write("\n".join(lines) + "\n")
     stream.flush()
 
@@ -868,16 +1029,18 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
         stream.write(f"vasc_pipeline: error: {exc}\nExisting results were left as they were.\n")
         return 2
     except KeyboardInterrupt:
-        stream.write("\nvasc_pipeline: interrupted. Finished runs are stored; the others resume from their last "
-                     "checkpoint when the same command is run again.\n")
+        stream.write(
+            "\nvasc_pipeline: interrupted. Finished runs are stored; the others resume from their last "
+            "checkpoint when the same command is run again.\n"
+        )
         return 130
     except SweepStartError as exc:
-        stream.write(f"vasc_pipeline: error: {exc}. Stores already created resume when the same command is run "
-                     "again.\n")
+        stream.write(
+            f"vasc_pipeline: error: {exc}. Stores already created resume when the same command is run again.\n"
+        )
         return 1
     if result.get("dry_run"):
         return 0
     reduction = result["reduction"]
-    reduction_failed = result["reduction_error"] or (reduction is not None and (reduction.errors or
-                                                                                reduction.damaged))
+    reduction_failed = result["reduction_error"] or (reduction is not None and (reduction.errors or reduction.damaged))
     return 1 if result["failed"] or result["damaged"] or reduction_failed else 0

@@ -140,8 +140,9 @@ def cost_tables(physics: Physics) -> CostTables:
     return CostTables(table)
 
 
-def supply_radius(n_terminals: int, tissue_measure: float, ndim: int, q_required: float | None = None,
-                  total_flow: float | None = None) -> float:
+def supply_radius(
+    n_terminals: int, tissue_measure: float, ndim: int, q_required: float | None = None, total_flow: float | None = None
+) -> float:
     """Radius [m] of one terminal's supply region.
 
     In 3-D (4/3) pi R^3 = Q_N / q_required with Q_N = Q0 / N; by default q_required =

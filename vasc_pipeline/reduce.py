@@ -52,12 +52,35 @@ import xarray as xr
 
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
-from .store import (RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, TRACE_FIELDS, RunStore, StoreError, identity_differences,
-                    verify_store)
+from .store import (
+    RUNS_DIR,
+    STATUS_COMPLETE,
+    SWEEP_AXES,
+    TRACE_FIELDS,
+    RunStore,
+    StoreError,
+    identity_differences,
+    verify_store,
+)
 
-__all__ = ["RunInfo", "Reduction", "ReductionError", "find_runs", "check_one_configuration", "best_runs", "build_summary", "write_summary",
-           "comparison_frame", "format_comparison", "reduce", "SUMMARY_NAME", "COMPARISON_CSV",
-           "COMPARISON_SUMMARY_CSV", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
+__all__ = [
+    "RunInfo",
+    "Reduction",
+    "ReductionError",
+    "find_runs",
+    "check_one_configuration",
+    "best_runs",
+    "build_summary",
+    "write_summary",
+    "comparison_frame",
+    "format_comparison",
+    "reduce",
+    "SUMMARY_NAME",
+    "COMPARISON_CSV",
+    "COMPARISON_SUMMARY_CSV",
+    "COMPARISON_SCHEME",
+    "COMPARISON_LEVEL",
+]
 
 SUMMARY_NAME = "summary.zarr"
 COMPARISON_CSV = "comparison.csv"
@@ -65,9 +88,14 @@ COMPARISON_SUMMARY_CSV = "comparison_summary.csv"
 COMPARISON_SCHEME, COMPARISON_LEVEL = "diameter_defined", "element"
 _COST_KEYS = ("total", "volume", "power", "supply", "exclusion", "pressure")
 _TRACE_META = {name: (units, long_name) for name, _, units, long_name in TRACE_FIELDS}
-_COST_META = {"total": _TRACE_META["total"], "volume": _TRACE_META["volume"], "power": _TRACE_META["power"],
-              "supply": _TRACE_META["supply"], "exclusion": _TRACE_META["exclusion"],
-              "pressure": _TRACE_META["pressure"]}
+_COST_META = {
+    "total": _TRACE_META["total"],
+    "volume": _TRACE_META["volume"],
+    "power": _TRACE_META["power"],
+    "supply": _TRACE_META["supply"],
+    "exclusion": _TRACE_META["exclusion"],
+    "pressure": _TRACE_META["pressure"],
+}
 _CELL_META = {
     "tissue": {"long_name": "tissue"},
     "method": {"long_name": "how the tree was grown (anneal, cco)"},
@@ -92,14 +120,14 @@ class RunInfo:
     n_terminals: int
     m_b: float
     seed: int
-    steps: int | None            # the sweep's steps coordinate (None without a steps axis)
+    steps: int | None  # the sweep's steps coordinate (None without a steps axis)
     steps_done: int
     wall_seconds: float
     cost: dict[str, float]
     physics: dict[str, Any]
     statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
-    config: dict[str, Any] = field(default_factory=dict, repr=False)   # the run's stored config
-    method: str = "anneal"       # "anneal" or "cco" (stores written before CCO existed are anneal runs)
+    config: dict[str, Any] = field(default_factory=dict, repr=False)  # the run's stored config
+    method: str = "anneal"  # "anneal" or "cco" (stores written before CCO existed are anneal runs)
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -119,9 +147,9 @@ class Reduction:
     comparison_summary_csv: Path
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
-    skipped: dict[str, str] = field(default_factory=dict)   # store -> why it was not used
-    damaged: dict[str, str] = field(default_factory=dict)   # the skipped stores that fail their checks
-    errors: dict[str, str] = field(default_factory=dict)    # stage (figures, ...) -> error text
+    skipped: dict[str, str] = field(default_factory=dict)  # store -> why it was not used
+    damaged: dict[str, str] = field(default_factory=dict)  # the skipped stores that fail their checks
+    errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
 
 
 # --------------------------------------------------------------------------------------------
@@ -136,8 +164,9 @@ def _float(value: Any) -> float:
         return math.nan
 
 
-def find_runs(output_dir: str | os.PathLike,
-              damaged: dict[str, str] | None = None) -> tuple[list[RunInfo], dict[str, str]]:
+def find_runs(
+    output_dir: str | os.PathLike, damaged: dict[str, str] | None = None
+) -> tuple[list[RunInfo], dict[str, str]]:
     """Complete runs under ``<output_dir>/runs`` and, for every other store, why it is left out.
 
     Every store is checked whole (:func:`vasc_pipeline.store.verify_store`: root metadata,
@@ -170,15 +199,24 @@ def find_runs(output_dir: str | os.PathLike,
             continue
         coords = attrs.get("coords") or {}
         config = attrs.get("config") or {}
-        runs.append(RunInfo(
-            run_id=attrs["run_id"], path=path, tissue=str(coords.get("tissue", config.get("tissue", {}).get("name"))),
-            n_terminals=int(coords.get("n_terminals", config.get("n_terminals"))),
-            m_b=float(coords.get("m_b", config.get("physics", {}).get("m_b"))), seed=int(attrs["seed"]),
-            steps=None if coords.get("steps") is None else int(coords["steps"]),
-            steps_done=int(attrs.get("steps_done", 0)), wall_seconds=_float(attrs.get("wall_seconds")),
-            cost=cost, physics=dict(attrs.get("physics") or {}), config=config,
-            statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()},
-            method=str(coords.get("method") or (config.get("method") or {}).get("name") or "anneal")))
+        runs.append(
+            RunInfo(
+                run_id=attrs["run_id"],
+                path=path,
+                tissue=str(coords.get("tissue", config.get("tissue", {}).get("name"))),
+                n_terminals=int(coords.get("n_terminals", config.get("n_terminals"))),
+                m_b=float(coords.get("m_b", config.get("physics", {}).get("m_b"))),
+                seed=int(attrs["seed"]),
+                steps=None if coords.get("steps") is None else int(coords["steps"]),
+                steps_done=int(attrs.get("steps_done", 0)),
+                wall_seconds=_float(attrs.get("wall_seconds")),
+                cost=cost,
+                physics=dict(attrs.get("physics") or {}),
+                config=config,
+                statistics={k: _float(v) for k, v in (attrs.get("statistics") or {}).items()},
+                method=str(coords.get("method") or (config.get("method") or {}).get("name") or "anneal"),
+            )
+        )
     return sorted(runs, key=lambda r: r.run_id), skipped
 
 
@@ -198,14 +236,16 @@ def check_one_configuration(output_dir: str | os.PathLike, runs: list[RunInfo]) 
     for r in runs:
         other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps, r.method), r)
         if other.steps_done != r.steps_done:
-            problems.append(f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell "
-                            f"{other.steps_done}")
+            problems.append(
+                f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell {other.steps_done}"
+            )
     if problems:
         raise ReductionError(
             f"output_dir {str(output_dir)!r} holds runs of different configurations, which are never reduced together "
             f"(every run of an output_dir shares its configuration except the sweep axes {', '.join(SWEEP_AXES)}, "
             f"and one cell's runs their step count): {'; '.join(problems)}. Move the runs of one configuration to "
-            "an output_dir of their own and reduce each.")
+            "an output_dir of their own and reduce each."
+        )
 
 
 def _cell_dims(runs: list[RunInfo]) -> list[str]:
@@ -294,17 +334,24 @@ def _morphometry_of(run: RunInfo) -> xr.Dataset:
     return _m.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
 
 
-_ASYMMETRY_VARS = ("diameter_ratio_small_mean", "diameter_ratio_small_sd", "diameter_ratio_small_se",
-                   "diameter_ratio_large_mean", "diameter_ratio_large_sd", "diameter_ratio_large_se",
-                   "bifurcation_count")
+_ASYMMETRY_VARS = (
+    "diameter_ratio_small_mean",
+    "diameter_ratio_small_sd",
+    "diameter_ratio_small_se",
+    "diameter_ratio_large_mean",
+    "diameter_ratio_large_sd",
+    "diameter_ratio_large_se",
+    "bifurcation_count",
+)
 
 
 def _comparison_part(morph: xr.Dataset, reference: xr.Dataset, orders: np.ndarray) -> tuple[xr.Dataset, dict]:
     """Model vs Kassab for every artery: (artery, order) table and per-artery summary values."""
     per_order, summary = [], {}
     for artery in ARTERIES:
-        table = _m.compare_with_kassab(morph, artery, scheme=COMPARISON_SCHEME, level=COMPARISON_LEVEL,
-                                       reference=reference)
+        table = _m.compare_with_kassab(
+            morph, artery, scheme=COMPARISON_SCHEME, level=COMPARISON_LEVEL, reference=reference
+        )
         per_order.append(xr.Dataset.from_dataframe(table).reindex(order=orders))
         summary[artery] = dict(table.attrs)
     ds = xr.concat(per_order, dim=xr.DataArray(list(ARTERIES), dims="artery", name="artery"))
@@ -322,18 +369,23 @@ def _comparison_part(morph: xr.Dataset, reference: xr.Dataset, orders: np.ndarra
     }
     for name, (units, long_name) in meta.items():
         ds[name].attrs = {"units": units, "long_name": long_name}
-    for name, long_name in (("mean_abs_log10_ratio_diameter", "mean over orders of |log10 model/Kassab diameter|"),
-                            ("mean_abs_log10_ratio_length", "mean over orders of |log10 model/Kassab length|"),
-                            ("mean_abs_log10_ratio", "mean of the diameter and length mean |log10 ratio|")):
+    for name, long_name in (
+        ("mean_abs_log10_ratio_diameter", "mean over orders of |log10 model/Kassab diameter|"),
+        ("mean_abs_log10_ratio_length", "mean over orders of |log10 model/Kassab length|"),
+        ("mean_abs_log10_ratio", "mean of the diameter and length mean |log10 ratio|"),
+    ):
         ds[name] = ("artery", [summary[a][name] for a in ARTERIES], {"units": "1", "long_name": long_name})
-    ds["n_orders_compared"] = ("artery", np.array([summary[a]["n_orders_compared"] for a in ARTERIES],
-                                                  dtype=np.int64),
-                               {"units": "1", "long_name": "orders present in both model and Kassab"})
+    ds["n_orders_compared"] = (
+        "artery",
+        np.array([summary[a]["n_orders_compared"] for a in ARTERIES], dtype=np.int64),
+        {"units": "1", "long_name": "orders present in both model and Kassab"},
+    )
     return ds.drop_vars("artery"), summary
 
 
-def build_summary(runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None = None,
-                  output_dir: str | os.PathLike | None = None) -> tuple[xr.DataTree, dict[tuple, RunInfo], list[str]]:
+def build_summary(
+    runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None = None, output_dir: str | os.PathLike | None = None
+) -> tuple[xr.DataTree, dict[tuple, RunInfo], list[str]]:
     """The summary DataTree of complete ``runs`` (see the module docstring for the schema).
 
     Parameters
@@ -365,17 +417,22 @@ def build_summary(runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None 
     orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
 
     morph_parts, asym_parts, comp_parts = {}, {}, {}
-    comparison_rows = []
     for key, ds in morph.items():
         r = best[key]
         ds = ds.drop_dims("node").reindex(order=orders)
         for name, var in ds.data_vars.items():  # reindex turns absent counts into NaN: back to 0
             if name.endswith("_count"):
                 ds[name] = var.fillna(0).astype(np.int64)
-        ds["dds_iterations"] = ((), int(ds.attrs["dds_iterations"]),
-                                {"units": "1", "long_name": "diameter-defined Strahler passes"})
-        ds["dds_converged"] = ((), int(ds.attrs["dds_converged"]),
-                               {"units": "1", "long_name": "diameter-defined Strahler converged (1) or not (0)"})
+        ds["dds_iterations"] = (
+            (),
+            int(ds.attrs["dds_iterations"]),
+            {"units": "1", "long_name": "diameter-defined Strahler passes"},
+        )
+        ds["dds_converged"] = (
+            (),
+            int(ds.attrs["dds_converged"]),
+            {"units": "1", "long_name": "diameter-defined Strahler converged (1) or not (0)"},
+        )
         ds.attrs = {}
         asym_parts[key] = ds[list(_ASYMMETRY_VARS)]
         morph_parts[key] = ds.drop_vars(list(_ASYMMETRY_VARS))
@@ -385,10 +442,17 @@ def build_summary(runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None 
     extra = {
         "best_seed": _cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
         "best_run_id": _cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
-        "best_cost": _cell_var(best, lambda r: r.cost["total"], np.float64, _COST_META["total"][0],
-                               "final annealed total cost C of the lowest-cost run"),
-        "n_seeds": {k: xr.DataArray(np.int64(n), attrs={"units": "1", "long_name": "complete runs (seeds) in the cell"})
-                    for k, n in n_seeds.items()},
+        "best_cost": _cell_var(
+            best,
+            lambda r: r.cost["total"],
+            np.float64,
+            _COST_META["total"][0],
+            "final annealed total cost C of the lowest-cost run",
+        ),
+        "n_seeds": {
+            k: xr.DataArray(np.int64(n), attrs={"units": "1", "long_name": "complete runs (seeds) in the cell"})
+            for k, n in n_seeds.items()
+        },
     }
     for name, values in extra.items():
         for key in best:
@@ -396,36 +460,55 @@ def build_summary(runs: list[RunInfo], *, morph: dict[tuple, xr.Dataset] | None 
     for key, r in best.items():
         gamma = _float(r.physics.get("gamma"))
         asym_parts[key]["symmetric_ratio"] = xr.DataArray(
-            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"})
+            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
+        )
 
     morphometry = _stack(morph_parts, dims, cell_coords)
     morphometry.attrs.update(
         title="Order-wise morphometry of the lowest-cost tree of every cell",
         ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
-                 f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).")
+        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
+    )
     asymmetry = _stack(asym_parts, dims, cell_coords)
     asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
     comparison = _stack(comp_parts, dims, cell_coords)
-    comparison = comparison.assign_coords(artery=("artery", np.array(ARTERIES, dtype=object),
-                                                  {"long_name": "coronary artery (Kassab 1993)"}))
+    comparison = comparison.assign_coords(
+        artery=("artery", np.array(ARTERIES, dtype=object), {"long_name": "coronary artery (Kassab 1993)"})
+    )
     comparison["order"].attrs.update(long_name=f"vessel order (shifted: highest = {_m.TOP_ORDER})", units="1")
-    comparison.attrs.update(title="Model (lowest-cost tree per cell) against Kassab et al. 1993",
-                            scheme=COMPARISON_SCHEME, level=COMPARISON_LEVEL)
+    comparison.attrs.update(
+        title="Model (lowest-cost tree per cell) against Kassab et al. 1993",
+        scheme=COMPARISON_SCHEME,
+        level=COMPARISON_LEVEL,
+    )
     costs = _costs(runs, best, dims, cell_coords)
     traces = _traces(runs, dims, cell_coords)
     kassab = _strings_as_objects(reference)
 
     tissues = sorted({r.tissue for r in runs})
-    root = xr.Dataset(attrs={
-        "title": "vasc_pipeline sweep summary",
-        "Conventions": "CF-1.10",
-        "history": f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')}: vasc_pipeline.reduce",
-        "output_dir": str(Path(output_dir).resolve()) if output_dir is not None else "",
-        "cell_dims": list(dims), "n_runs": len(runs), "n_cells": len(best), "tissues": tissues,
-        "comparison_scheme": COMPARISON_SCHEME, "comparison_level": COMPARISON_LEVEL,
-    })
-    groups = {"/": root, "/morphometry": morphometry, "/asymmetry": asymmetry, "/costs": costs, "/traces": traces,
-              "/kassab": kassab, "/comparison": comparison}
+    root = xr.Dataset(
+        attrs={
+            "title": "vasc_pipeline sweep summary",
+            "Conventions": "CF-1.10",
+            "history": f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')}: vasc_pipeline.reduce",
+            "output_dir": str(Path(output_dir).resolve()) if output_dir is not None else "",
+            "cell_dims": list(dims),
+            "n_runs": len(runs),
+            "n_cells": len(best),
+            "tissues": tissues,
+            "comparison_scheme": COMPARISON_SCHEME,
+            "comparison_level": COMPARISON_LEVEL,
+        }
+    )
+    groups = {
+        "/": root,
+        "/morphometry": morphometry,
+        "/asymmetry": asymmetry,
+        "/costs": costs,
+        "/traces": traces,
+        "/kassab": kassab,
+        "/comparison": comparison,
+    }
     if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
         for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
             groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
@@ -471,17 +554,30 @@ def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
         steps_done[at], wall[at], run_id[at] = r.steps_done, r.wall_seconds, r.run_id
         is_best[at] = best[r.cell(dims)] is r
     full = dims + ["seed"]
-    data = {f"cost_{k}": (full, values[k], {"units": _COST_META[k][0],
-                                            "long_name": "final " + _COST_META[k][1] + ("" if k == "total" else
-                                                                                        " (unscaled)")})
-            for k in _COST_KEYS}
+    data = {
+        f"cost_{k}": (
+            full,
+            values[k],
+            {
+                "units": _COST_META[k][0],
+                "long_name": "final " + _COST_META[k][1] + ("" if k == "total" else " (unscaled)"),
+            },
+        )
+        for k in _COST_KEYS
+    }
     data["steps_done"] = (full, steps_done, {"units": "1", "long_name": "proposed moves done (0: no run)"})
     data["wall_seconds"] = (full, wall, {"units": "s", "long_name": "wall-clock time of the run, all sessions"})
     data["run_id"] = (full, run_id, {"long_name": "run id (empty: no complete run)"})
     data["is_best"] = (full, is_best, {"units": "1", "long_name": "1 for the lowest-cost run of the cell"})
-    data["cavity_share"] = (full, cavity, {
-        "units": "1", "long_name": "share of the large vessels' length (r >= r_max/4) inside the tissue's cavities "
-                                   "(NaN: no cavity, e.g. not the heart)"})
+    data["cavity_share"] = (
+        full,
+        cavity,
+        {
+            "units": "1",
+            "long_name": "share of the large vessels' length (r >= r_max/4) inside the tissue's cavities "
+            "(NaN: no cavity, e.g. not the heart)",
+        },
+    )
     coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
     coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
     return xr.Dataset(data, coords=coords, attrs={"title": "Final costs of every complete run"})
@@ -507,7 +603,11 @@ def _traces(runs, dims, cell_coords) -> xr.Dataset:
             arrays[n][at + (slice(0, k),)] = t[n]
     full = dims + ["seed", "record"]
     data = {n: (full, arrays[n], {"units": _TRACE_META[n][0], "long_name": _TRACE_META[n][1]}) for n in names}
-    data["trace_length"] = (dims + ["seed"], length, {"units": "1", "long_name": "trace records of the run (0: no run)"})
+    data["trace_length"] = (
+        dims + ["seed"],
+        length,
+        {"units": "1", "long_name": "trace records of the run (0: no run)"},
+    )
     coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
     coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
     coords["record"] = ("record", np.arange(n_rec, dtype=np.int64), {"units": "1", "long_name": "trace record"})
@@ -548,9 +648,15 @@ def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
     keys = [d for d in summary.attrs["cell_dims"]]
     frame = frame.merge(run_ids[keys + ["best_run_id"]], on=keys, how="inner")
     frame = frame[frame.best_run_id != ""]
-    frame = frame.rename(columns={"best_run_id": "run_id", "model_diameter": "model_diameter_m",
-                                  "kassab_diameter": "kassab_diameter_m", "model_length": "model_length_m",
-                                  "kassab_length": "kassab_length_m"})
+    frame = frame.rename(
+        columns={
+            "best_run_id": "run_id",
+            "model_diameter": "model_diameter_m",
+            "kassab_diameter": "kassab_diameter_m",
+            "model_length": "model_length_m",
+            "kassab_length": "kassab_length_m",
+        }
+    )
     front = keys + ["run_id", "artery", "order"]
     drop = [c for c in ("tissue", "method") if c in frame.columns and c not in keys]
     frame = frame.drop(columns=drop)
@@ -559,14 +665,19 @@ def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
 
 def _comparison_summary_frame(summary: xr.DataTree) -> pd.DataFrame:
     comp = summary["comparison"].to_dataset()
-    names = ["mean_abs_log10_ratio_diameter", "mean_abs_log10_ratio_length", "mean_abs_log10_ratio",
-             "n_orders_compared"]
+    names = [
+        "mean_abs_log10_ratio_diameter",
+        "mean_abs_log10_ratio_length",
+        "mean_abs_log10_ratio",
+        "n_orders_compared",
+    ]
     frame = comp[names].to_dataframe().reset_index()
     keys = list(summary.attrs["cell_dims"])
     run_ids = summary["morphometry"]["best_run_id"].to_dataframe().reset_index()
     frame = frame.merge(run_ids[keys + ["best_run_id"]], on=keys).rename(columns={"best_run_id": "run_id"})
-    frame = frame[frame.run_id != ""].drop(columns=[c for c in ("tissue", "method") if c in frame.columns
-                                                    and c not in keys])
+    frame = frame[frame.run_id != ""].drop(
+        columns=[c for c in ("tissue", "method") if c in frame.columns and c not in keys]
+    )
     return frame[keys + ["run_id", "artery"] + names].reset_index(drop=True)
 
 
@@ -590,9 +701,11 @@ def format_comparison(summary: xr.DataTree) -> str:
     comp = summary["comparison"].to_dataset()
     morph = summary["morphometry"].to_dataset()
     dims = list(summary.attrs["cell_dims"])
-    lines = [f"Model vs Kassab et al. 1993 (pig coronary arteries): mean {COMPARISON_LEVEL} diameter D [um] and "
-             f"length L [mm] per order ({COMPARISON_SCHEME.replace('_', '-')} Strahler, highest order = "
-             f"{_m.TOP_ORDER}); lowest-cost seed of every cell."]
+    lines = [
+        f"Model vs Kassab et al. 1993 (pig coronary arteries): mean {COMPARISON_LEVEL} diameter D [um] and "
+        f"length L [mm] per order ({COMPARISON_SCHEME.replace('_', '-')} Strahler, highest order = "
+        f"{_m.TOP_ORDER}); lowest-cost seed of every cell."
+    ]
     stacked = morph["best_run_id"].stack(cell=dims) if dims else morph["best_run_id"]
     for i in range(stacked.sizes["cell"]):
         point = {d: stacked["cell"].values[i][j] for j, d in enumerate(dims)}
@@ -603,8 +716,10 @@ def format_comparison(summary: xr.DataTree) -> str:
         cost = float(morph["best_cost"].sel(point))
         lines.append("")
         lines.append(f"{run_id} (best of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.6g})")
-        head = (f"{'order':>5} {'D model':>7} " + " ".join(f"{'D ' + a:>7}" for a in ARTERIES) + "   "
-                f"{'L model':>7} " + " ".join(f"{'L ' + a:>7}" for a in ARTERIES) + f" {'n model':>7}")
+        head = (
+            f"{'order':>5} {'D model':>7} " + " ".join(f"{'D ' + a:>7}" for a in ARTERIES) + "   "
+            f"{'L model':>7} " + " ".join(f"{'L ' + a:>7}" for a in ARTERIES) + f" {'n model':>7}"
+        )
         lines.append(head)
         for o in c.order.values[::-1]:
             row = c.sel(order=o)
@@ -613,10 +728,13 @@ def format_comparison(summary: xr.DataTree) -> str:
                 continue
             md = float(row.model_diameter.isel(artery=0))
             ml = float(row.model_length.isel(artery=0))
-            lines.append(f"{int(o):>5} {_fmt(md, 1e6)} " + " ".join(_fmt(float(row.kassab_diameter.sel(artery=a)), 1e6)
-                                                           for a in ARTERIES)
-                         + f"   {_fmt(ml, 1e3)} " + " ".join(_fmt(float(row.kassab_length.sel(artery=a)), 1e3)
-                                                             for a in ARTERIES) + f" {n_model:>7}")
+            lines.append(
+                f"{int(o):>5} {_fmt(md, 1e6)} "
+                + " ".join(_fmt(float(row.kassab_diameter.sel(artery=a)), 1e6) for a in ARTERIES)
+                + f"   {_fmt(ml, 1e3)} "
+                + " ".join(_fmt(float(row.kassab_length.sel(artery=a)), 1e3) for a in ARTERIES)
+                + f" {n_model:>7}"
+            )
         mad = " ".join(f"{a} {float(c.mean_abs_log10_ratio_diameter.sel(artery=a)):.3f}" for a in ARTERIES)
         mal = " ".join(f"{a} {float(c.mean_abs_log10_ratio_length.sel(artery=a)):.3f}" for a in ARTERIES)
         n = int(c.n_orders_compared.isel(artery=0))
@@ -628,8 +746,9 @@ def format_comparison(summary: xr.DataTree) -> str:
 # The stage
 
 
-def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True,
-           stream: TextIO | None = None) -> Reduction:
+def reduce(
+    output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True, stream: TextIO | None = None
+) -> Reduction:
     """Reduce every complete run of ``output_dir``: summary, comparison, tree exports, figures.
 
     Parameters
@@ -660,8 +779,10 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
     runs, skipped = find_runs(out, damaged)
     if not runs:
         why = "".join(f"\n  left out: {why}" for why in skipped.values())
-        raise ReductionError(f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
-                             f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}")
+        raise ReductionError(
+            f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
+            f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}"
+        )
     check_one_configuration(out, runs)
     morph = {}
     summary, best, dims = build_summary(runs, morph=morph, output_dir=out)
@@ -669,8 +790,9 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
     frame = comparison_frame(summary)
     csv = _write_csv(frame, out / COMPARISON_CSV)
     csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
-    result = Reduction(out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped,
-                       damaged=damaged)
+    result = Reduction(
+        out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped, damaged=damaged
+    )
     stream.write(format_comparison(summary) + "\n")
     if exports:
         from .export import export_run
@@ -687,10 +809,11 @@ def reduce(output_dir: str | os.PathLike, *, figures: bool = True, exports: bool
             result.figures = make_figures(summary, out)
         except Exception as exc:
             result.errors["figures"] = f"{type(exc).__name__}: {exc}"
-    lines = [f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells "
-             f"({len(skipped)} stores left out)",
-             f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
-             f"  comparison: {csv}, {csv_summary}"]
+    lines = [
+        f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
+        f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
+        f"  comparison: {csv}, {csv_summary}",
+    ]
     if result.trees:
         lines.append(f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv)")
     if result.figures:

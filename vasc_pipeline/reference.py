@@ -19,8 +19,16 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-__all__ = ["KASSAB_CSV_NAME", "ARTERIES", "LEVELS", "ORDERS", "kassab_csv_path", "kassab_source",
-           "kassab_table", "kassab_dataset"]
+__all__ = [
+    "KASSAB_CSV_NAME",
+    "ARTERIES",
+    "LEVELS",
+    "ORDERS",
+    "kassab_csv_path",
+    "kassab_source",
+    "kassab_table",
+    "kassab_dataset",
+]
 
 KASSAB_CSV_NAME = "kassab1993_tables1-3_diameter_length.csv"
 ARTERIES = ("RCA", "LAD", "LCX")
@@ -140,9 +148,14 @@ def kassab_dataset() -> xr.Dataset:
     coords = {
         "artery": ("artery", list(ARTERIES), {"long_name": "coronary artery"}),
         "level": ("level", list(LEVELS), {"long_name": "vessel unit (segment or element)"}),
-        "order": ("order", np.array(ORDERS, dtype=np.int64), {"long_name": "diameter-defined Strahler order",
-                                                               "units": "1"}),
+        "order": (
+            "order",
+            np.array(ORDERS, dtype=np.int64),
+            {"long_name": "diameter-defined Strahler order", "units": "1"},
+        ),
     }
-    return xr.Dataset(data_vars, coords=coords,
-                      attrs={"title": "Kassab et al. 1993, porcine coronary arteries, Tables 1-3",
-                             "source": source})
+    return xr.Dataset(
+        data_vars,
+        coords=coords,
+        attrs={"title": "Kassab et al. 1993, porcine coronary arteries, Tables 1-3", "source": source},
+    )

@@ -53,14 +53,32 @@ import zarr
 
 from .config import KEYS_ADDED_LATER, ConfigError
 
-__all__ = ["RunStore", "Checkpoint", "CheckpointWarning", "StoreError", "StoreDamaged", "verify_store",
-           "is_empty_leftover", "run_path", "run_lock", "config_hash", "hashed_config", "config_differences", "identity_differences", "SWEEP_AXES", "TRACE_FIELDS", "STATUS_RUNNING", "STATUS_COMPLETE", "RUNS_DIR"]
+__all__ = [
+    "RunStore",
+    "Checkpoint",
+    "CheckpointWarning",
+    "StoreError",
+    "StoreDamaged",
+    "verify_store",
+    "is_empty_leftover",
+    "run_path",
+    "run_lock",
+    "config_hash",
+    "hashed_config",
+    "config_differences",
+    "identity_differences",
+    "SWEEP_AXES",
+    "TRACE_FIELDS",
+    "STATUS_RUNNING",
+    "STATUS_COMPLETE",
+    "RUNS_DIR",
+]
 
 RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
 FORMAT = "vasc_pipeline.run/1"
 CHECKPOINTS = "checkpoints"
-TRACE_CHUNK = 4096          # records per trace chunk: a few appends per chunk, small files
+TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small files
 
 # Config sections that do not change a run's result: where it is written, how often it
 # checkpoints, and how the sweep/cluster around it is organised. Everything else does.
@@ -117,9 +135,11 @@ def verify_store(path: str | os.PathLike) -> "RunStore":
         store.verify()
     except Exception as exc:
         what = str(exc) if isinstance(exc, StoreError) else f"{type(exc).__name__}: {exc}"
-        raise StoreDamaged(f"run store {str(path)!r} is damaged: {what}. Move it aside (e.g. mv {path} "
-                           f"{path}.damaged) and rerun the same command to run it again from the start; the "
-                           "other runs are not affected") from exc
+        raise StoreDamaged(
+            f"run store {str(path)!r} is damaged: {what}. Move it aside (e.g. mv {path} "
+            f"{path}.damaged) and rerun the same command to run it again from the start; the "
+            "other runs are not affected"
+        ) from exc
     return store
 
 
@@ -186,16 +206,21 @@ def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
     return {prefix[:-1]: tree}
 
 
-def config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any],
-                       ignore: tuple[str, ...] = ()) -> list[str]:
+def config_differences(
+    stored: Mapping[str, Any], requested: Mapping[str, Any], ignore: tuple[str, ...] = ()
+) -> list[str]:
     """Human-readable ``key: stored -> requested`` lines for every result-determining difference
     (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
     a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
+
     def ignored(key: str) -> bool:  # an entry ending in "." ignores a whole section
         return any(key == i or (i.endswith(".") and key.startswith(i)) for i in ignore)
 
-    return [f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
-            for k in sorted(set(a) | set(b)) if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")]
+    return [
+        f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
+        for k in sorted(set(a) | set(b))
+        if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")
+    ]
 
 
 def _method(config: Mapping[str, Any]) -> str:
@@ -252,16 +277,34 @@ class RunStore:
     # -- creation and opening ---------------------------------------------------------------
 
     @classmethod
-    def create(cls, path: str | os.PathLike, *, run_id: str, seed: int, config: Mapping[str, Any],
-               coords: Mapping[str, Any], total_steps: int) -> "RunStore":
+    def create(
+        cls,
+        path: str | os.PathLike,
+        *,
+        run_id: str,
+        seed: int,
+        config: Mapping[str, Any],
+        coords: Mapping[str, Any],
+        total_steps: int,
+    ) -> "RunStore":
         """A new store (refuses to overwrite) holding the run's identity and ``status="running"``."""
         path = Path(path)
         config = _jsonable(config)
         attrs = {
-            "format": FORMAT, "run_id": run_id, "seed": int(seed), "status": STATUS_RUNNING, "steps_done": 0,
-            "total_steps": int(total_steps), "wall_seconds": 0.0, "config": config,
-            "config_hash": config_hash(config), "coords": _jsonable(coords), "checkpoint": None,
-            "trace_length": 0, "resumes": []}
+            "format": FORMAT,
+            "run_id": run_id,
+            "seed": int(seed),
+            "status": STATUS_RUNNING,
+            "steps_done": 0,
+            "total_steps": int(total_steps),
+            "wall_seconds": 0.0,
+            "config": config,
+            "config_hash": config_hash(config),
+            "coords": _jsonable(coords),
+            "checkpoint": None,
+            "trace_length": 0,
+            "resumes": [],
+        }
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
@@ -282,8 +325,9 @@ class RunStore:
             group = zarr.open_group(str(path), mode=mode, zarr_format=3)
             attrs = dict(group.attrs)
         except Exception as exc:  # a damaged zarr.json: nothing in it can be trusted
-            raise StoreError(f"run store {str(path)!r} is unreadable ({exc}); move it away to restart "
-                             "that run") from exc
+            raise StoreError(
+                f"run store {str(path)!r} is unreadable ({exc}); move it away to restart that run"
+            ) from exc
         if attrs.get("format") != FORMAT or "config_hash" not in attrs:
             raise StoreError(f"{str(path)!r} is not a vasc_pipeline run store (attrs format={attrs.get('format')!r})")
         return cls(path, group)
@@ -321,7 +365,8 @@ class RunStore:
         raise ConfigError(
             f"run {self.run_id!r} in {str(self.path)!r} was started with a different configuration, and runs "
             f"are never mixed: {'; '.join(diff) or 'config hash differs'}. Restore those settings to resume it, "
-            "or choose a new output_dir (output_dir=...) for the changed configuration.")
+            "or choose a new output_dir (output_dir=...) for the changed configuration."
+        )
 
     # -- tissue -----------------------------------------------------------------------------
 
@@ -336,24 +381,48 @@ class RunStore:
         ``distance`` is the map the exclusion term used: the distance transform of the
         exclusion domain (the tissue plus, for the heart, the ventricular cavities). Dims (z, y, x).
         """
-        attrs = {"voxel_size": float(tissue.voxel_size), "origin": [float(v) for v in tissue.origin],
-                 "units_voxel_size": "m", "name": tissue.name, "ndim": int(tissue.ndim)}
+        attrs = {
+            "voxel_size": float(tissue.voxel_size),
+            "origin": [float(v) for v in tissue.origin],
+            "units_voxel_size": "m",
+            "name": tissue.name,
+            "ndim": int(tissue.ndim),
+        }
         group = self.group.require_group("tissue")
         group.update_attributes(attrs)
         dims = ["z", "y", "x"]
-        mask = group.create_array("mask", shape=tissue.mask.shape, dtype="uint8", chunks=tissue.mask.shape,
-                                  dimension_names=dims, overwrite=True,
-                                  attributes={**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"})
+        mask = group.create_array(
+            "mask",
+            shape=tissue.mask.shape,
+            dtype="uint8",
+            chunks=tissue.mask.shape,
+            dimension_names=dims,
+            overwrite=True,
+            attributes={**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"},
+        )
         mask[...] = tissue.mask
-        excl = group.create_array("exclusion", shape=tissue.exclusion.shape, dtype="uint8",
-                                  chunks=tissue.exclusion.shape, dimension_names=dims, overwrite=True,
-                                  attributes={"long_name": "exclusion domain of large vessels (1 = excluded: "
-                                                           "tissue and cavities)", "units": "1"})
+        excl = group.create_array(
+            "exclusion",
+            shape=tissue.exclusion.shape,
+            dtype="uint8",
+            chunks=tissue.exclusion.shape,
+            dimension_names=dims,
+            overwrite=True,
+            attributes={
+                "long_name": "exclusion domain of large vessels (1 = excluded: tissue and cavities)",
+                "units": "1",
+            },
+        )
         excl[...] = tissue.exclusion
-        dist = group.create_array("distance", shape=tissue.distance.shape, dtype="float32",
-                                  chunks=tissue.distance.shape, dimension_names=dims, overwrite=True,
-                                  attributes={"long_name": "distance to the nearest voxel outside the exclusion "
-                                                           "domain", "units": "voxel"})
+        dist = group.create_array(
+            "distance",
+            shape=tissue.distance.shape,
+            dtype="float32",
+            chunks=tissue.distance.shape,
+            dimension_names=dims,
+            overwrite=True,
+            attributes={"long_name": "distance to the nearest voxel outside the exclusion domain", "units": "voxel"},
+        )
         dist[...] = tissue.distance
 
     def has_tissue(self) -> bool:
@@ -367,9 +436,16 @@ class RunStore:
     def _create_trace(self) -> None:
         group = self.group.require_group("trace")
         for name, dtype, units, long_name in TRACE_FIELDS:
-            group.create_array(name, shape=(0,), chunks=(TRACE_CHUNK,), dtype=dtype, dimension_names=["step"],
-                               fill_value=0 if dtype == "int64" else np.nan, overwrite=True,
-                               attributes={"units": units, "long_name": long_name})
+            group.create_array(
+                name,
+                shape=(0,),
+                chunks=(TRACE_CHUNK,),
+                dtype=dtype,
+                dimension_names=["step"],
+                fill_value=0 if dtype == "int64" else np.nan,
+                overwrite=True,
+                attributes={"units": units, "long_name": long_name},
+            )
 
     @property
     def trace_length(self) -> int:
@@ -390,7 +466,7 @@ class RunStore:
             arr = self.group[f"trace/{name}"]
             arr.resize((start + n,))  # resize first, write second: a crash leaves fill values
             if n:
-                arr[start:start + n] = rows[name]
+                arr[start : start + n] = rows[name]
         return start + n
 
     def read_trace(self) -> dict[str, np.ndarray]:
@@ -415,8 +491,10 @@ class RunStore:
                 return
             arrays = self._final_arrays(n)
         except Exception as exc:  # a missing or truncated chunk or array fails to decode
-            raise StoreError(f"its {'final tree or ' if attrs.get('status') == STATUS_COMPLETE else ''}trace "
-                             f"cannot be read ({type(exc).__name__}: {exc})") from exc
+            raise StoreError(
+                f"its {'final tree or ' if attrs.get('status') == STATUS_COMPLETE else ''}trace "
+                f"cannot be read ({type(exc).__name__}: {exc})"
+            ) from exc
         if arrays["trace/step"].shape != (n,):
             raise StoreError(f"its trace holds {arrays['trace/step'].shape[0]} records, {n} committed")
         for key, crc in (attrs.get("checksums") or {}).items():
@@ -431,8 +509,9 @@ class RunStore:
         root = self.path / CHECKPOINTS
         return sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
 
-    def write_checkpoint(self, arrays: Mapping[str, np.ndarray], *, step: int, trace_length: int,
-                         wall_seconds: float) -> str:
+    def write_checkpoint(
+        self, arrays: Mapping[str, np.ndarray], *, step: int, trace_length: int, wall_seconds: float
+    ) -> str:
         """Write a new checkpoint group, flip the root pointer to it, prune; returns its name."""
         names = self._checkpoint_names()
         seq = int(names[-1][1:]) + 1 if names else 1
@@ -445,11 +524,18 @@ class RunStore:
             arr[...] = data
             manifest[key] = {"shape": list(data.shape), "dtype": data.dtype.str, "crc32": _crc(data)}
         # The manifest is the group's last key: a checkpoint without one is incomplete.
-        group.update_attributes({"manifest": manifest, "step": int(step), "trace_length": int(trace_length),
-                                 "wall_seconds": float(wall_seconds)})
+        group.update_attributes(
+            {
+                "manifest": manifest,
+                "step": int(step),
+                "trace_length": int(trace_length),
+                "wall_seconds": float(wall_seconds),
+            }
+        )
         previous = self.group.attrs.get("checkpoint")
-        self._set_attrs(checkpoint=name, steps_done=int(step), trace_length=int(trace_length),
-                        wall_seconds=float(wall_seconds))
+        self._set_attrs(
+            checkpoint=name, steps_done=int(step), trace_length=int(trace_length), wall_seconds=float(wall_seconds)
+        )
         # Keep the new checkpoint and the one committed before it (the fallback); anything
         # else is older or a partial leftover of a crashed write.
         for n in names:
@@ -468,8 +554,10 @@ class RunStore:
         for key, info in manifest.items():
             data = group[key][...]
             if list(data.shape) != info["shape"] or data.dtype.str != info["dtype"]:
-                raise ValueError(f"array {key!r} has shape {data.shape} {data.dtype.str}, expected "
-                                 f"{tuple(info['shape'])} {info['dtype']}")
+                raise ValueError(
+                    f"array {key!r} has shape {data.shape} {data.dtype.str}, expected "
+                    f"{tuple(info['shape'])} {info['dtype']}"
+                )
             if _crc(data) != info["crc32"]:
                 raise ValueError(f"array {key!r} fails its CRC-32 check")
             arrays[key] = data
@@ -491,10 +579,15 @@ class RunStore:
             try:
                 return self._read_checkpoint(name)
             except Exception as exc:  # any failure to read or verify means: not a good checkpoint
-                warnings.warn(f"{self.path}: checkpoint {name} is truncated or corrupted ({exc}); "
-                              "falling back to the previous good checkpoint", CheckpointWarning, stacklevel=2)
-        warnings.warn(f"{self.path}: no good checkpoint left; the run restarts from step 0",
-                      CheckpointWarning, stacklevel=2)
+                warnings.warn(
+                    f"{self.path}: checkpoint {name} is truncated or corrupted ({exc}); "
+                    "falling back to the previous good checkpoint",
+                    CheckpointWarning,
+                    stacklevel=2,
+                )
+        warnings.warn(
+            f"{self.path}: no good checkpoint left; the run restarts from step 0", CheckpointWarning, stacklevel=2
+        )
         return None
 
     def record_resume(self, checkpoint: Checkpoint | None) -> None:
@@ -504,15 +597,31 @@ class RunStore:
         if checkpoint is None:  # a restart from scratch also forgets any committed progress
             self._set_attrs(resumes=resumes, checkpoint=None, steps_done=0, trace_length=0, wall_seconds=0.0)
         else:
-            self._set_attrs(resumes=resumes, steps_done=checkpoint.step, trace_length=checkpoint.trace_length,
-                            wall_seconds=checkpoint.wall_seconds)
+            self._set_attrs(
+                resumes=resumes,
+                steps_done=checkpoint.step,
+                trace_length=checkpoint.trace_length,
+                wall_seconds=checkpoint.wall_seconds,
+            )
 
     # -- completion -------------------------------------------------------------------------
 
-    def write_final(self, *, parent: np.ndarray, position: np.ndarray, radius: np.ndarray, kind: np.ndarray,
-                    physics: Mapping[str, Any], cost: Mapping[str, float], cost_recomputed: Mapping[str, float],
-                    steps_done: int, trace_length: int, wall_seconds: float,
-                    anneal: Mapping[str, Any] | None = None, statistics: Mapping[str, Any] | None = None) -> None:
+    def write_final(
+        self,
+        *,
+        parent: np.ndarray,
+        position: np.ndarray,
+        radius: np.ndarray,
+        kind: np.ndarray,
+        physics: Mapping[str, Any],
+        cost: Mapping[str, float],
+        cost_recomputed: Mapping[str, float],
+        steps_done: int,
+        trace_length: int,
+        wall_seconds: float,
+        anneal: Mapping[str, Any] | None = None,
+        statistics: Mapping[str, Any] | None = None,
+    ) -> None:
         """Write the final tree, then mark the run complete in one attribute write, then tidy up.
 
         ``anneal``: how the schedule ran (:func:`vasc_pipeline.engine.finish`), stored as attrs["anneal"];
@@ -520,22 +629,40 @@ class RunStore:
         attrs["statistics"].
         """
         group = self.group.require_group("tree")
-        specs = (("parent", parent, "int64", ["node"], "parent node (-1 at inlets)", "1"),
-                 ("position", position, "float64", ["node", "xyz"], "node position", "m"),
-                 ("radius", radius, "float64", ["node"], "radius of the segment ending at the node", "m"),
-                 ("kind", kind, "int8", ["node"], "node kind: 0 inlet, 1 bifurcation, 2 terminal", "1"))
+        specs = (
+            ("parent", parent, "int64", ["node"], "parent node (-1 at inlets)", "1"),
+            ("position", position, "float64", ["node", "xyz"], "node position", "m"),
+            ("radius", radius, "float64", ["node"], "radius of the segment ending at the node", "m"),
+            ("kind", kind, "int8", ["node"], "node kind: 0 inlet, 1 bifurcation, 2 terminal", "1"),
+        )
         for name, data, dtype, dims, long_name, units in specs:
             data = np.ascontiguousarray(data, dtype=dtype)
-            arr = group.create_array(name, shape=data.shape, dtype=dtype, chunks=data.shape, dimension_names=dims,
-                                     overwrite=True, attributes={"long_name": long_name, "units": units})
+            arr = group.create_array(
+                name,
+                shape=data.shape,
+                dtype=dtype,
+                chunks=data.shape,
+                dimension_names=dims,
+                overwrite=True,
+                attributes={"long_name": long_name, "units": units},
+            )
             arr[...] = data
         # CRC-32 of what the run produced (tree and committed trace), read back as stored, in the
         # same attribute write that makes the run complete: verify() checks them.
         checksums = {key: _crc(data) for key, data in self._final_arrays(int(trace_length)).items()}
-        self._set_attrs(status=STATUS_COMPLETE, checkpoint=None, steps_done=int(steps_done),
-                        trace_length=int(trace_length), wall_seconds=float(wall_seconds), physics=dict(physics),
-                        cost=dict(cost), cost_recomputed=dict(cost_recomputed), anneal=dict(anneal or {}),
-                        statistics=dict(statistics or {}), checksums=checksums)
+        self._set_attrs(
+            status=STATUS_COMPLETE,
+            checkpoint=None,
+            steps_done=int(steps_done),
+            trace_length=int(trace_length),
+            wall_seconds=float(wall_seconds),
+            physics=dict(physics),
+            cost=dict(cost),
+            cost_recomputed=dict(cost_recomputed),
+            anneal=dict(anneal or {}),
+            statistics=dict(statistics or {}),
+            checksums=checksums,
+        )
         self.tidy()
 
     def tidy(self) -> None:

@@ -66,8 +66,9 @@ def cell_id(tissue: str, n_terminals: int, m_b: float, steps: int | None = None,
     return text if method == "anneal" else f"{text}-{method}"  # anneal ids stay as they always were
 
 
-def run_id(tissue: str, n_terminals: int, m_b: float, seed: int, steps: int | None = None,
-           method: str = "anneal") -> str:
+def run_id(
+    tissue: str, n_terminals: int, m_b: float, seed: int, steps: int | None = None, method: str = "anneal"
+) -> str:
     """``<tissue>-N<N>-mb<m_b>[-S<steps>][-<method>]-s<seed>``: the grid coordinates (cell id + seed).
 
     The method appears only when it is not the anneal (``heart-N200-mb641.3-cco-s0``), so
@@ -123,10 +124,16 @@ def job_config(cfg: RunConfig, n_terminals: int, m_b: float, seed: int, steps: i
     """The run config of one grid point (no sweep; cluster left at its defaults)."""
     anneal = cfg.anneal if steps is None else replace(cfg.anneal, steps=int(steps))
     return replace(
-        cfg, n_terminals=int(n_terminals), seed=int(seed), output_dir=str(Path(cfg.output_dir).expanduser().resolve()),
-        physics=replace(cfg.physics, m_b=float(m_b)), anneal=anneal,
+        cfg,
+        n_terminals=int(n_terminals),
+        seed=int(seed),
+        output_dir=str(Path(cfg.output_dir).expanduser().resolve()),
+        physics=replace(cfg.physics, m_b=float(m_b)),
+        anneal=anneal,
         tissue=replace(cfg.tissue, path=_absolute(cfg.tissue.path)),
-        terminals=replace(cfg.terminals, path=_absolute(cfg.terminals.path)), sweep=None)
+        terminals=replace(cfg.terminals, path=_absolute(cfg.terminals.path)),
+        sweep=None,
+    )
 
 
 def expand(cfg: Any) -> list[Job]:
@@ -138,29 +145,56 @@ def expand(cfg: Any) -> list[Job]:
     """
     cfg = validate(to_run_config(cfg))  # the base config as given (job_config resolves output_dir)
     sw = cfg.sweep
-    ns = _axis("sweep.n_terminals", sw and sw.n_terminals, cfg.n_terminals, int, lambda v: v >= 2,
-               "an integer >= 2 (terminal nodes)")
-    mbs = _axis("sweep.m_b", sw and sw.m_b, cfg.physics.m_b, float, lambda v: v > 0 and math.isfinite(v),
-                "a finite number > 0 (W m^-3)")
+    ns = _axis(
+        "sweep.n_terminals",
+        sw and sw.n_terminals,
+        cfg.n_terminals,
+        int,
+        lambda v: v >= 2,
+        "an integer >= 2 (terminal nodes)",
+    )
+    mbs = _axis(
+        "sweep.m_b",
+        sw and sw.m_b,
+        cfg.physics.m_b,
+        float,
+        lambda v: v > 0 and math.isfinite(v),
+        "a finite number > 0 (W m^-3)",
+    )
     seeds = _axis("sweep.seeds", sw and sw.seeds, cfg.seed, int, lambda v: seed_ok(int(v)), SEED_ACCEPTED)
     has_steps = sw is not None and sw.steps is not None
-    steps_axis = _axis("sweep.steps", sw.steps, None, int, lambda v: 1 <= v <= MAX_STEPS,
-                       f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)") if has_steps else [None]
+    steps_axis = (
+        _axis(
+            "sweep.steps",
+            sw.steps,
+            None,
+            int,
+            lambda v: 1 <= v <= MAX_STEPS,
+            f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)",
+        )
+        if has_steps
+        else [None]
+    )
     tissue = cfg.tissue.name
     method = cfg.method.name
     if method == "cco" and has_steps:
-        raise ConfigError("sweep.steps (proposed moves) has no meaning for method=cco, which adds N terminals; "
-                          "drop the steps axis or use method=anneal")
+        raise ConfigError(
+            "sweep.steps (proposed moves) has no meaning for method=cco, which adds N terminals; "
+            "drop the steps axis or use method=anneal"
+        )
     jobs = []
     for n, m_b, steps, seed in itertools.product(ns, mbs, steps_axis, seeds):
         run_cfg = validate(job_config(cfg, n, m_b, seed, steps))
         rid = run_id(tissue, n, m_b, seed, steps, method)
         config = stored_config(run_cfg)
         coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps, "method": method}
-        jobs.append(Job(rid, cell_id(tissue, n, m_b, steps, method), coords, config,
-                        str(run_path(run_cfg.output_dir, rid))))
+        jobs.append(
+            Job(rid, cell_id(tissue, n, m_b, steps, method), coords, config, str(run_path(run_cfg.output_dir, rid)))
+        )
     ids = [j.run_id for j in jobs]
     if len(set(ids)) != len(ids):  # two m_b equal to 10 significant digits
-        raise ConfigError("sweep grid values too close to tell apart in run ids (10 significant digits): "
-                          f"{sorted({i for i in ids if ids.count(i) > 1})}")
+        raise ConfigError(
+            "sweep grid values too close to tell apart in run ids (10 significant digits): "
+            f"{sorted({i for i in ids if ids.count(i) > 1})}"
+        )
     return jobs

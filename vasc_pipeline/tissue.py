@@ -54,7 +54,8 @@ def check_grid_memory(counts, voxel_size: float) -> None:
         raise TissueError(
             f"tissue.voxel_size={voxel_size:.4g} m gives a voxel grid of {shape} = {n:.3g} voxels, which needs about "
             f"{need / 2**30:.3g} GiB to build, more than the {have / 2**30:.3g} GiB of memory here; set a larger "
-            "tissue.voxel_size (unset, it is R_supply / 4, so it shrinks as n_terminals grows: lower n_terminals)")
+            "tissue.voxel_size (unset, it is R_supply / 4, so it shrinks as n_terminals grows: lower n_terminals)"
+        )
 
 
 class TissueError(ValueError):
@@ -117,7 +118,9 @@ class Tissue:
         if self.ndim == 2 and self.mask.shape[0] != 1:
             raise TissueError("a 2-D tissue has exactly one voxel layer")
         if self.inlets.shape[1] != 3 or len(self.inlets) < 1:
-            raise TissueError(f"tissue.inlets must be a list of [x, y, z] positions in metres, got {self.inlets.tolist()}")
+            raise TissueError(
+                f"tissue.inlets must be a list of [x, y, z] positions in metres, got {self.inlets.tolist()}"
+            )
         if not self.inlet_names:
             self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
         lo, hi = self.bounds
@@ -125,14 +128,17 @@ class Tissue:
             if np.any(p < lo) or np.any(p > hi):
                 raise TissueError(
                     f"inlet {k} ({self.inlet_names[k]}) at {p.tolist()} m lies outside the voxel grid "
-                    f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid")
+                    f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid"
+                )
         if self.exclusion is None:
             self.exclusion = self.mask.copy()
         else:
             extra = np.asarray(self.exclusion)
             if extra.shape != self.mask.shape:
-                raise TissueError(f"tissue '{self.name}': the exclusion mask has shape {extra.shape}, the tissue "
-                                  f"mask {self.mask.shape}; they must be the same grid")
+                raise TissueError(
+                    f"tissue '{self.name}': the exclusion mask has shape {extra.shape}, the tissue "
+                    f"mask {self.mask.shape}; they must be the same grid"
+                )
             self.exclusion = (self.mask | (extra != 0)).astype(np.uint8)
         # Distance to the nearest voxel outside the exclusion domain. The builders pad the
         # grid, but a user's mask may touch its edge: pad here so the grid edge counts as
@@ -141,8 +147,10 @@ class Tissue:
         feature = np.pad(self.exclusion, pad).astype(bool)
         if self.open_boundary is not None:
             if self.open_boundary.shape != self.mask.shape:
-                raise TissueError(f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
-                                  f"the tissue mask {self.mask.shape}; they must be the same grid")
+                raise TissueError(
+                    f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
+                    f"the tissue mask {self.mask.shape}; they must be the same grid"
+                )
             feature |= np.pad(np.asarray(self.open_boundary, dtype=bool), pad, mode="edge")
         dist = ndimage.distance_transform_edt(feature)
         inner = dist[1:-1, 1:-1, 1:-1] if self.ndim == 3 else dist[:, 1:-1, 1:-1]
@@ -164,7 +172,7 @@ class Tissue:
     @property
     def measure(self) -> float:
         """Tissue volume [m^3] (area [m^2] for a 2-D tissue) as voxelised."""
-        return self.n_tissue_voxels * self.voxel_size ** self.ndim
+        return self.n_tissue_voxels * self.voxel_size**self.ndim
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -192,8 +200,14 @@ class Tissue:
         return out
 
 
-def voxelize(inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray], lo, hi, voxel_size: float,
-             margin: float = 0.0, ndim: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def voxelize(
+    inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    lo,
+    hi,
+    voxel_size: float,
+    margin: float = 0.0,
+    ndim: int = 3,
+) -> tuple[np.ndarray, np.ndarray]:
     """Mask of voxels whose centre satisfies ``inside(x, y, z)`` over the box [lo, hi].
 
     The grid covers the box plus ``margin`` [m] and at least one voxel on every side
@@ -214,8 +228,9 @@ def voxelize(inside: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     return inside(x, y, z).astype(np.uint8), origin
 
 
-def default_voxel_size(n_terminals: int, measure: float, ndim: int, q_required: float | None = None,
-                       total_flow: float | None = None) -> float:
+def default_voxel_size(
+    n_terminals: int, measure: float, ndim: int, q_required: float | None = None, total_flow: float | None = None
+) -> float:
     """R_supply / 4 (SPEC section 3) for the given tissue measure (volume, or area in 2-D).
 
     R_supply is :func:`vasc_pipeline.physics.supply_radius`, the one formula the cost uses,
@@ -224,26 +239,44 @@ def default_voxel_size(n_terminals: int, measure: float, ndim: int, q_required: 
     return supply_radius(n_terminals, measure, ndim, q_required, total_flow) / VOXELS_PER_SUPPLY_RADIUS
 
 
-def sphere(n_terminals: int, radius: float = 0.02, voxel_size: float | None = None, q_required: float | None = None,
-           total_flow: float | None = None, **_) -> Tissue:
+def sphere(
+    n_terminals: int,
+    radius: float = 0.02,
+    voxel_size: float | None = None,
+    q_required: float | None = None,
+    total_flow: float | None = None,
+    **_,
+) -> Tissue:
     """A ball of tissue centred at the origin; the inlet sits just above its north pole."""
     if not radius > 0:
         raise TissueError(f"tissue.radius must be a positive length in metres, got {radius}")
     h = voxel_size or default_voxel_size(n_terminals, 4.0 / 3.0 * math.pi * radius**3, 3, q_required, total_flow)
-    mask, origin = voxelize(lambda x, y, z: x**2 + y**2 + z**2 <= radius**2,
-                            [-radius] * 3, [radius] * 3, h, margin=0.25 * radius)
+    mask, origin = voxelize(
+        lambda x, y, z: x**2 + y**2 + z**2 <= radius**2, [-radius] * 3, [radius] * 3, h, margin=0.25 * radius
+    )
     return Tissue("sphere", mask, h, origin, [[0.0, 0.0, radius + 0.1 * radius]], inlet_names=("root",))
 
 
-def box(n_terminals: int, size: tuple[float, float, float] = (0.04, 0.04, 0.02), voxel_size: float | None = None,
-        q_required: float | None = None, total_flow: float | None = None, **_) -> Tissue:
+def box(
+    n_terminals: int,
+    size: tuple[float, float, float] = (0.04, 0.04, 0.02),
+    voxel_size: float | None = None,
+    q_required: float | None = None,
+    total_flow: float | None = None,
+    **_,
+) -> Tissue:
     """A rectangular block [0, size] of tissue; the inlet sits above the centre of its top face."""
     size = np.asarray(size, dtype=np.float64)
     if size.shape != (3,) or np.any(size <= 0):
         raise TissueError(f"tissue.size must be three positive lengths [x, y, z] in metres, got {size.tolist()}")
     h = voxel_size or default_voxel_size(n_terminals, float(np.prod(size)), 3, q_required, total_flow)
-    mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= size[0]) & (y >= 0) & (y <= size[1])
-                            & (z >= 0) & (z <= size[2]), [0, 0, 0], size, h, margin=0.1 * size.min())
+    mask, origin = voxelize(
+        lambda x, y, z: (x >= 0) & (x <= size[0]) & (y >= 0) & (y <= size[1]) & (z >= 0) & (z <= size[2]),
+        [0, 0, 0],
+        size,
+        h,
+        margin=0.1 * size.min(),
+    )
     inlet = [0.5 * size[0], 0.5 * size[1], size[2] + 0.05 * size.min()]
     return Tissue("box", mask, h, origin, [inlet], inlet_names=("root",))
 
@@ -253,8 +286,9 @@ def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None
     if not side > 0:
         raise TissueError(f"tissue.side must be a positive length in metres, got {side}")
     h = voxel_size or default_voxel_size(n_terminals, side**2, 2)
-    mask, origin = voxelize(lambda x, y, z: (x >= 0) & (x <= side) & (y >= 0) & (y <= side),
-                            [0, 0, 0], [side, side, 0], h, ndim=2)
+    mask, origin = voxelize(
+        lambda x, y, z: (x >= 0) & (x <= side) & (y >= 0) & (y <= side), [0, 0, 0], [side, side, 0], h, ndim=2
+    )
     return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
 
 
@@ -276,10 +310,15 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
             with open(p, "rb") as fh:
                 head = fh.read(64)
             if not head.startswith(b"\x93NUMPY"):  # np.load would call anything else "pickled data"
-                kind = "a text file" if head and all(32 <= b < 127 or b in b"\t\r\n" for b in head) else \
-                    "a binary file of another format"
-                raise TissueError(f"tissue.{field}: {str(p)!r} is {kind}, not a NumPy .npy array (it starts with "
-                                  f"{head[:24]!r}); save the mask with numpy.save, or give a Zarr array")
+                kind = (
+                    "a text file"
+                    if head and all(32 <= b < 127 or b in b"\t\r\n" for b in head)
+                    else "a binary file of another format"
+                )
+                raise TissueError(
+                    f"tissue.{field}: {str(p)!r} is {kind}, not a NumPy .npy array (it starts with "
+                    f"{head[:24]!r}); save the mask with numpy.save, or give a Zarr array"
+                )
             data = np.load(p, allow_pickle=False)
         else:
             import zarr
@@ -299,14 +338,24 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
         raise TissueError(f"tissue.{field}: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
     if np.issubdtype(data.dtype, np.inexact) and not np.all(np.isfinite(data)):
         bad = int(np.count_nonzero(~np.isfinite(data)))
-        raise TissueError(f"tissue.{field}: the mask {str(p)!r} holds {bad} NaN or infinite voxels; every voxel must "
-                          "be a number (nonzero = tissue, 0 = outside)")
+        raise TissueError(
+            f"tissue.{field}: the mask {str(p)!r} holds {bad} NaN or infinite voxels; every voxel must "
+            "be a number (nonzero = tissue, 0 = outside)"
+        )
     return data, attrs
 
 
-def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = None, origin=None,
-         inlets=None, array: str | None = None, exclusion_path: str | None = None,
-         exclusion_array: str | None = None, **_) -> Tissue:
+def mask(
+    n_terminals: int,
+    path: str | None = None,
+    voxel_size: float | None = None,
+    origin=None,
+    inlets=None,
+    array: str | None = None,
+    exclusion_path: str | None = None,
+    exclusion_array: str | None = None,
+    **_,
+) -> Tissue:
     """A user's voxel mask from a ``.npy`` file or a Zarr array (medical-image segmentations).
 
     ``path`` names a ``.npy`` file or a Zarr store (``array`` then names the array inside
@@ -337,8 +386,10 @@ def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = N
     if exclusion_path:
         extra, _ = _load_mask_array(exclusion_path, exclusion_array, "exclusion_path")
         if extra.shape != data.shape:
-            raise TissueError(f"tissue.exclusion_path: the exclusion mask has shape {extra.shape}, the tissue mask "
-                              f"(tissue.path) {data.shape}; they must be the same grid")
+            raise TissueError(
+                f"tissue.exclusion_path: the exclusion mask has shape {extra.shape}, the tissue mask "
+                f"(tissue.path) {data.shape}; they must be the same grid"
+            )
         extra = (np.asarray(extra) != 0).astype(np.uint8)
     if ndim == 2:
         grid = grid[None]
@@ -347,7 +398,12 @@ def mask(n_terminals: int, path: str | None = None, voxel_size: float | None = N
 
 
 TISSUES: dict[str, Callable[..., Tissue]] = {
-    "heart": heart, "plane2d": plane2d, "sphere": sphere, "box": box, "mask": mask}
+    "heart": heart,
+    "plane2d": plane2d,
+    "sphere": sphere,
+    "box": box,
+    "mask": mask,
+}
 
 
 def build_tissue(name: str, n_terminals: int, **params) -> Tissue:

@@ -15,8 +15,18 @@ import numpy as np
 from . import rng as _rng
 from .tissue import Tissue
 
-__all__ = ["KIND_INLET", "KIND_BIFURCATION", "KIND_TERMINAL", "Tree", "node_kinds", "random_tree",
-           "count_terminals", "check_tree", "load_terminal_sites", "TreeError"]
+__all__ = [
+    "KIND_INLET",
+    "KIND_BIFURCATION",
+    "KIND_TERMINAL",
+    "Tree",
+    "node_kinds",
+    "random_tree",
+    "count_terminals",
+    "check_tree",
+    "load_terminal_sites",
+    "TreeError",
+]
 
 KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
 
@@ -57,15 +67,16 @@ class Tree:
         return node_kinds(self.n_terminals, self.n_inlets)
 
     def copy(self) -> "Tree":
-        return Tree(self.parent.copy(), self.children.copy(), self.position.copy(), self.n_downstream.copy(),
-                    self.n_inlets)
+        return Tree(
+            self.parent.copy(), self.children.copy(), self.position.copy(), self.n_downstream.copy(), self.n_inlets
+        )
 
 
 def node_kinds(n_terminals: int, n_inlets: int) -> np.ndarray:
     """int8 (2N,) node kinds in the fixed layout."""
     kind = np.full(2 * n_terminals, KIND_BIFURCATION, dtype=np.int8)
     kind[:n_inlets] = KIND_INLET
-    kind[n_inlets:n_inlets + n_terminals] = KIND_TERMINAL
+    kind[n_inlets : n_inlets + n_terminals] = KIND_TERMINAL
     return kind
 
 
@@ -180,7 +191,7 @@ def check_tree(tree: Tree, tissue: Tissue | None = None) -> None:
         node = np.flatnonzero(counts != tree.n_downstream)[0]
         raise TreeError(f"n_downstream[{node}] = {tree.n_downstream[node]} but {counts[node]} terminals are below it")
     if tissue is not None:
-        term = tree.position[k:k + n]
+        term = tree.position[k : k + n]
         if not np.all(tissue.contains(term)):
             raise TreeError("a terminal lies outside the tissue")
         lo, hi = tissue.bounds
