@@ -170,19 +170,16 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
         trace_length = store.append_trace(trace.arrays(), trace_length)
         report = engine.finish(problem, state)
         tree = engine.tree_of(problem, state)
-        store.write_final(
-            parent=tree.parent,
-            position=tree.position,
-            radius=engine.node_radii(tree, problem.physics),
-            kind=tree.kind,
-            physics=problem.physics.as_attrs(),
+        _write_tree(
+            store,
+            problem,
+            tree,
             cost=engine.running_costs(problem, state),
             cost_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
             steps_done=int(state.counters[kernel.COUNTER_STEP]),
             trace_length=trace_length,
             wall_seconds=wall(),
             anneal=report,
-            statistics=engine.tree_statistics(problem, tree),
         )
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(
@@ -195,6 +192,19 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
             seen,
             time.process_time() - cpu_started,
         )
+
+
+def _write_tree(store: RunStore, problem: engine.Problem, tree, **final) -> None:
+    """The final tree of either method, with what follows from it (radii, kinds, statistics)."""
+    store.write_final(
+        parent=tree.parent,
+        position=tree.position,
+        radius=engine.node_radii(tree, problem.physics),
+        kind=tree.kind,
+        physics=problem.physics.as_attrs(),
+        statistics=engine.tree_statistics(problem, tree),
+        **final,
+    )
 
 
 def _run_cco(
@@ -217,12 +227,10 @@ def _run_cco(
     n = problem.physics.n_terminals
     if report is not None:
         report({"run_id": job.run_id, "cell": job.cell, "step": n, "total_steps": n, "cost": result.costs["total"]})
-    store.write_final(
-        parent=tree.parent,
-        position=tree.position,
-        radius=engine.node_radii(tree, problem.physics),
-        kind=tree.kind,
-        physics=problem.physics.as_attrs(),
+    _write_tree(
+        store,
+        problem,
+        tree,
         cost=result.costs,
         cost_recomputed=result.costs_recomputed,
         steps_done=n,
