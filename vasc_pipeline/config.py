@@ -257,8 +257,6 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
-    if cfg.tissue.name == "heart" and cfg.n_terminals < 2:
-        raise ConfigError("n_terminals must be >= 2 for the heart (two inlets)")
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))

@@ -168,7 +168,7 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
                 last_checkpoint = time.perf_counter()
 
         trace_length = store.append_trace(trace.arrays(), trace_length)
-        report = engine.finish(problem, state)
+        anneal_report = engine.finish(problem, state)
         tree = engine.tree_of(problem, state)
         _write_tree(
             store,
@@ -179,7 +179,7 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
             steps_done=int(state.counters[kernel.COUNTER_STEP]),
             trace_length=trace_length,
             wall_seconds=wall(),
-            anneal=report,
+            anneal=anneal_report,
         )
         session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(

@@ -84,7 +84,7 @@ State = namedtuple(
         "costs",
         "compensation",  # float64 (5,) running sums and their Neumaier compensation
         "rng",  # uint64 (4,)
-        "counters",  # int64 (8,) see COUNTER_*
+        "counters",  # int64 (N_COUNTERS,) see COUNTER_*
         "step_size",  # float64 (2,) translation half-width for terminals, bifurcations [m]
         "schedule",  # float64 (2,) T_start, T_end (configured, or calibrated at step 0)
         "cell_of",
