@@ -219,6 +219,7 @@ def test_job_writes_the_documented_layout(tmp_path):
     assert mask.dtype == np.uint8 and mask.attrs["voxel_size"] == ref.problem.tissue.voxel_size
     assert mask.attrs["origin"] == list(ref.problem.tissue.origin)
     assert s.group["tissue/distance"].dtype == np.float32
+    assert s.group["tissue"].attrs["inlet_names"] == list(ref.problem.tissue.inlet_names) == ["root"]
     np.testing.assert_array_equal(s.group["tissue/exclusion"][...], ref.problem.tissue.exclusion)
     np.testing.assert_array_equal(s.group["tissue/distance"][...], ref.problem.tissue.distance)
     assert a["statistics"] == ref.statistics == {}  # plane2d has no cavity

@@ -59,8 +59,6 @@ _KASSAB_STYLE = {
     "LCX": dict(marker="^", color="0.65"),
 }
 _UM, _MM = 1e6, 1e3
-# Inlet names by tissue, in inlet order (the run store keeps positions, not names; see heart.py).
-_INLET_NAMES = {"heart": ("LCA", "RCA")}
 
 # Our figures' style, applied inside each plotting function only (rc_context): importing this
 # module or drawing a figure changes neither the caller's backend nor their rcParams. Figures
@@ -554,7 +552,8 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
         ax.autoscale_view()
         ax.set_xlabel(f"{a} [mm]")
         ax.set_ylabel(f"{b} [mm]")
-    names = _INLET_NAMES.get(str(t_attrs.get("name")), ())
+    # The store names the inlets (stores older than that: the heart's, known by its name).
+    names = t_attrs.get("inlet_names") or {"heart": ("LCA", "RCA")}.get(str(t_attrs.get("name")), ())
     handles = [
         Line2D(
             [], [], color=colors(i % 10), linewidth=2, label=f"{names[i]} tree" if i < len(names) else f"inlet {i} tree"

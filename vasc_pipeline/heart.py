@@ -286,7 +286,9 @@ def _build(
     if exclude_cavities:
         solid = voxelize(_inside(d, solid=True), lo_all, hi_all, h, margin=margin)[0]
         openings = _open_base(solid)
-    tissue = Tissue("heart", mask, h, origin, inl, inlet_names=("LCA", "RCA"), exclusion=solid, open_boundary=openings)
+    tissue = Tissue(
+        "heart", mask, h, origin, inl, inlet_names=d["inlet_names"], exclusion=solid, open_boundary=openings
+    )
     return tissue, d
 
 

@@ -387,6 +387,7 @@ class RunStore:
             "units_voxel_size": "m",
             "name": tissue.name,
             "ndim": int(tissue.ndim),
+            "inlet_names": list(tissue.inlet_names),
         }
         group = self.group.require_group("tissue")
         group.update_attributes(attrs)
