@@ -298,6 +298,17 @@ def _voxel_coords(model, x, y, z):
 
 
 @jit_norc_inline
+def in_tissue(model, p):
+    """True when the point p [m] lies in a tissue voxel (where a terminal may be)."""
+    nz, ny, nx = model.mask.shape
+    ux, uy, uz = _voxel_coords(model, p[0], p[1], p[2])
+    ix = math.floor(ux + 0.5)
+    iy = math.floor(uy + 0.5)
+    iz = math.floor(uz + 0.5)
+    return 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz and model.mask[iz, iy, ix] != 0
+
+
+@jit_norc_inline
 def _range_change(supply, k, j, lo, hi, sign, write):
     """C_s change when voxels lo..hi of row (k, j) gain ``sign``.
 
@@ -679,12 +690,7 @@ def _translate_node(model, state, i, new, temp):
     cls = 0 if is_terminal else 1
     state.counters[COUNTER_TERMINAL_PROPOSED + 2 * cls] += 1
     if is_terminal:
-        nz, ny, nx = model.mask.shape
-        ux, uy, uz = _voxel_coords(model, new[0], new[1], new[2])
-        ix = math.floor(ux + 0.5)
-        iy = math.floor(uy + 0.5)
-        iz = math.floor(uz + 0.5)
-        if ix < 0 or iy < 0 or iz < 0 or ix >= nx or iy >= ny or iz >= nz or model.mask[iz, iy, ix] == 0:
+        if not in_tissue(model, new):
             return ILLEGAL
     else:
         for a in range(3):

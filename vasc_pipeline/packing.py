@@ -42,16 +42,6 @@ def packing_temperature(model, step):
 
 
 @jit_norc_inline
-def _in_tissue(model, p):
-    h = model.voxel_size
-    nz, ny, nx = model.mask.shape
-    i = int(math.floor((p[0] - model.origin[0]) / h + 0.5))
-    j = int(math.floor((p[1] - model.origin[1]) / h + 0.5))
-    k = int(math.floor((p[2] - model.origin[2]) / h + 0.5))
-    return 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and model.mask[k, j, i] != 0
-
-
-@jit_norc_inline
 def _pack_move(model, state, temp, new):
     """Propose moving one random terminal; accept on ΔC_s at ``temp``. Returns the outcome."""
     rng = state.rng
@@ -66,7 +56,7 @@ def _pack_move(model, state, temp, new):
     if model.planar:
         new[2] = pos[i, 2]
     outcome = kernel.ILLEGAL
-    if _in_tissue(model, new):
+    if kernel.in_tissue(model, new):
         d = kernel.supply_move_delta(model, state.supply, pos[i], new)
         if d <= 0.0 or next_double(rng) < math.exp(-d / temp):
             kernel.supply_move(model, state.supply, pos[i], new)
