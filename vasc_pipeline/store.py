@@ -391,40 +391,32 @@ class RunStore:
         }
         group = self.group.require_group("tissue")
         group.update_attributes(attrs)
-        dims = ["z", "y", "x"]
-        mask = group.create_array(
-            "mask",
-            shape=tissue.mask.shape,
-            dtype="uint8",
-            chunks=tissue.mask.shape,
-            dimension_names=dims,
-            overwrite=True,
-            attributes={**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"},
+        specs = (
+            ("mask", tissue.mask, "uint8", {**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"}),
+            (
+                "exclusion",
+                tissue.exclusion,
+                "uint8",
+                {"long_name": "exclusion domain of large vessels (1 = excluded: tissue and cavities)", "units": "1"},
+            ),
+            (
+                "distance",
+                tissue.distance,
+                "float32",
+                {"long_name": "distance to the nearest voxel outside the exclusion domain", "units": "voxel"},
+            ),
         )
-        mask[...] = tissue.mask
-        excl = group.create_array(
-            "exclusion",
-            shape=tissue.exclusion.shape,
-            dtype="uint8",
-            chunks=tissue.exclusion.shape,
-            dimension_names=dims,
-            overwrite=True,
-            attributes={
-                "long_name": "exclusion domain of large vessels (1 = excluded: tissue and cavities)",
-                "units": "1",
-            },
-        )
-        excl[...] = tissue.exclusion
-        dist = group.create_array(
-            "distance",
-            shape=tissue.distance.shape,
-            dtype="float32",
-            chunks=tissue.distance.shape,
-            dimension_names=dims,
-            overwrite=True,
-            attributes={"long_name": "distance to the nearest voxel outside the exclusion domain", "units": "voxel"},
-        )
-        dist[...] = tissue.distance
+        for name, data, dtype, attributes in specs:
+            arr = group.create_array(
+                name,
+                shape=data.shape,
+                dtype=dtype,
+                chunks=data.shape,
+                dimension_names=["z", "y", "x"],
+                overwrite=True,
+                attributes=attributes,
+            )
+            arr[...] = data
 
     def has_tissue(self) -> bool:
         try:
