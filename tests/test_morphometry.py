@@ -14,6 +14,7 @@ from vasc_pipeline.morphometry import (
     check_tree_arrays,
     children_of,
     compare_with_kassab,
+    contract_short_segments,
     diameter_defined_strahler,
     elements,
     grouped_statistics,
@@ -128,14 +129,14 @@ def random_tree(n_terminals, rng, noise=0.0, chain=False):
 
 
 def naive_strahler(parent, kind):
-    """Obviously correct recursive twin of strahler_orders (small trees only)."""
+    """Obviously correct recursive twin of strahler_orders (small trees, any branching)."""
     children = {i: [c for c in range(len(parent)) if parent[c] == i] for i in range(len(parent))}
 
     def order(v):
         if kind[v] == 2:
             return 1
-        a, b = (order(c) for c in children[v])
-        return a + 1 if a == b else max(a, b)
+        top, second = sorted((order(c) for c in children[v]), reverse=True)[:2]
+        return top + 1 if top == second else top
 
     return [0 if kind[v] == 0 else order(v) for v in range(len(parent))]
 
@@ -461,6 +462,70 @@ def test_forest_with_two_inlets_in_scrambled_numbering():
     assert ds.element_count.values.tolist() == total.values.tolist() == [12, 5, 2, 1]
     assert ds.attrs["n_inlets"] == 2 and ds.attrs["n_segments"] == 22
     assert int(ds.bifurcation_count.sum()) == 3 + 7
+
+
+def test_zero_length_root_is_contracted_not_counted_as_the_top_order():
+    # The symmetric tree with its inlet moved onto the root bifurcation: the root segment
+    # has length 0 and the inlet really has two trunks (13 and 14), as when the anneal puts
+    # the first branch point on the ostium.
+    parent, position, radius, kind = symmetric_tree()
+    position[0] = position[15]
+    raw = morphometry(parent, position, radius, kind, min_segment_length=0)
+    assert raw.element_count.sel(scheme="diameter_defined").values.tolist() == [8, 4, 2, 1]
+    assert float(raw.element_length_mean.sel(scheme="diameter_defined", order=11)) == 0  # the artefact
+    ds = morphometry(parent, position, radius, kind)
+    assert ds.attrs["n_contracted_segments"] == 1 and ds.attrs["n_segments"] == 14
+    assert ds.order.values.tolist() == [9, 10, 11]
+    for scheme in ds.scheme.values:
+        s = ds.sel(scheme=scheme)
+        assert s.element_count.values.tolist() == [8, 4, 2]
+        np.testing.assert_allclose(s.element_length_mean.values, np.array([0.5, 1, 2]) * MM)
+        assert s.segment_order.values[[0, 15, 13]].tolist() == [0, 0, 11]
+        assert s.element_id.values[15] == -1
+    # without zero-length segments nothing changes
+    parent, position, radius, kind = symmetric_tree()
+    a, b = (
+        morphometry(parent, position, radius, kind),
+        morphometry(parent, position, radius, kind, min_segment_length=0),
+    )
+    assert a.equals(b) and a.attrs["n_contracted_segments"] == 0
+
+
+def test_contraction_keeps_zero_length_terminals_and_merges_chains():
+    # 0 inlet -> 1 -> 2 (on 1) -> 3 (on 2) -> terminals 4, 5; side terminals 6 (on 2, zero
+    # length), 7 (on 3); terminal 8 on 1. Nodes 2 and 3 are contracted into 1, which gets
+    # the children 4, 5, 6, 7, 8; terminal 6 stays although its segment has length 0.
+    parent = np.array([-1, 0, 1, 2, 3, 3, 2, 3, 1])
+    kind = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2], dtype=np.int8)
+    position = np.zeros((9, 3))
+    position[1:] = [1, 0, 0]
+    position[[4, 5, 7, 8]] += [[1, 1, 0], [1, -1, 0], [0, 2, 0], [0, -2, 0]]
+    new_parent, index = contract_short_segments(parent, position, kind)
+    assert index.tolist() == [0, 1, 4, 5, 6, 7, 8]
+    assert new_parent.tolist() == [-1, 0, 1, 1, 1, 1, 1]
+    check_tree_arrays(new_parent, kind[index], multifurcations=True)
+    with pytest.raises(ValueError, match="has 5 children"):
+        check_tree_arrays(new_parent, kind[index])
+    assert contract_short_segments(parent, position, kind, min_length=0)[1].tolist() == list(range(9))
+    with pytest.raises(ValueError, match="min_length"):
+        contract_short_segments(parent, position, kind, min_length=-1.0)
+
+
+def test_strahler_and_asymmetry_at_a_multifurcation():
+    # Node 1 has four daughters: terminals 2, 3 (order 1), bifurcation 4 (order 2, over
+    # terminals 5, 6) and terminal 7. The two highest daughter orders are 2 and 1: node 1
+    # keeps order 2. Adding a second order-2 daughter (8 over 9, 10) raises it to 3.
+    parent = np.array([-1, 0, 1, 1, 1, 4, 4, 1])
+    kind = np.array([0, 1, 2, 2, 1, 2, 2, 2], dtype=np.int8)
+    assert strahler_orders(parent, kind).tolist() == [0, 2, 1, 1, 2, 1, 1, 1] == naive_strahler(parent, kind)
+    parent2 = np.concatenate([parent, [1, 8, 8]])
+    kind2 = np.concatenate([kind, [1, 2, 2]]).astype(np.int8)
+    assert strahler_orders(parent2, kind2)[1] == 3 == naive_strahler(parent2, kind2)[1]
+    radius = np.array([0, 3.0, 1.0, 1.5, 2.0, 1.0, 1.0, 0.5])
+    a = asymmetry_ratios(parent, radius, kind, strahler_orders(parent, kind))
+    assert a.node.tolist() == [1, 4] and a.order.tolist() == [2, 2]
+    np.testing.assert_allclose(a.small, [0.5 / 3, 0.5])
+    np.testing.assert_allclose(a.large, [2 / 3, 0.5])
 
 
 def test_compare_with_kassab_on_the_symmetric_tree():

@@ -36,9 +36,21 @@ segments change order. Edge cases, decided here:
 - The iteration stops after ``max_iter`` passes even if not converged (``converged`` is
   then False and the last orders are returned).
 
+Zero-length segments: the anneal's optimal branch points may coincide with their parent
+branch point (the optimum of a three-point junction sits on a vertex), leaving a segment of
+length zero between two bifurcations: a trifurcation written as two bifurcations. Ordered
+as they stand, such a segment counts as a vessel of its own and, at an ostium, becomes a
+spurious highest order of zero length that shifts every other order down by one.
+:func:`morphometry` therefore contracts segments shorter than ``min_segment_length``
+(default 1 nm, far below any vessel and far above round-off) whose child is a branching
+node, and orders the resulting tree, which may have multifurcations: conventional Strahler
+gives ``n + 1`` when the two highest daughter orders are both ``n``; asymmetry ratios use
+the smallest and largest daughter. Zero-length *terminal* segments (a terminal on its
+branch point) are kept: they are outlets with a diameter.
+
 Elements: a segment joins its parent segment's element when both have the same order.
-When both daughters of a bifurcation share their parent's order (possible with
-diameter-defined orders), only the wider daughter (ties: the lower node index) continues
+When several daughters of a branching node share their parent's order (possible with
+diameter-defined orders), only the widest daughter (ties: the lower node index) continues
 the element, so elements are always series runs; the other daughter starts a new element.
 """
 
@@ -61,6 +73,7 @@ __all__ = [
     "topological_order",
     "inlet_of",
     "select_trees",
+    "contract_short_segments",
     "segment_lengths",
     "strahler_orders",
     "DDSResult",
@@ -82,6 +95,7 @@ KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
 TOP_ORDER = 11  # order of the pig coronary trunks (RCA, LAD) in Kassab et al. 1993
 
 SCHEMES = ("diameter_defined", "strahler")
+MIN_SEGMENT_LENGTH = 1e-9  # m: shorter segments between branch points are contracted
 
 
 # --------------------------------------------------------------------------- topology
@@ -197,7 +211,15 @@ def children_of(parent) -> np.ndarray:
     return table
 
 
-def check_tree_arrays(parent, kind, radius=None, position=None) -> None:
+def _child_lists(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Children of every node, any number: node v's are ``child[start[v]:start[v + 1]]``."""
+    child = np.flatnonzero(parent >= 0)
+    child = child[np.argsort(parent[child], kind="stable")]  # stable: increasing index per node
+    count = np.bincount(parent[child], minlength=parent.size)
+    return np.concatenate(([0], np.cumsum(count))), child
+
+
+def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcations: bool = False) -> None:
     """Check the tree-array contract; raise ValueError naming the field otherwise.
 
     Parameters
@@ -210,6 +232,9 @@ def check_tree_arrays(parent, kind, radius=None, position=None) -> None:
         Must be finite and > 0 on every segment (every non-inlet node).
     position : float64 (node, 3), optional
         Must be finite.
+    multifurcations : bool
+        Accept contracted trees (:func:`contract_short_segments`): inlets with one or
+        more children, branching nodes (kind 1) with two or more.
     """
     parent = _parent_array(parent)
     n = parent.size
@@ -229,12 +254,17 @@ def check_tree_arrays(parent, kind, radius=None, position=None) -> None:
         )
     n_children = np.bincount(parent[parent >= 0], minlength=n)
     expected = np.choose(kind.astype(np.int64), (1, 2, 0))
-    bad = n_children != expected
+    bad = (
+        ((n_children < expected) | ((kind == KIND_TERMINAL) & (n_children > 0)))
+        if multifurcations
+        else n_children != expected
+    )
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
+        need = "at least 1, a branching node at least 2" if multifurcations else "1, a bifurcation 2"
         raise ValueError(
             f"parent/kind: node {i} of kind {int(kind[i])} has {int(n_children[i])} children; an "
-            f"inlet needs 1, a bifurcation 2, a terminal 0"
+            f"inlet needs {need}, a terminal 0"
         )
     node_depth(parent)  # raises on cycles
     if radius is not None:
@@ -280,6 +310,48 @@ def select_trees(parent, position, radius, kind, inlets):
     return (sub_parent, np.asarray(position)[index], np.asarray(radius)[index], np.asarray(kind)[index], index)
 
 
+def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGMENT_LENGTH):
+    """Merge every branching node that sits on its parent node into that parent.
+
+    Parameters
+    ----------
+    parent : int64 (node,)
+    position : float64 (node, 3), metres
+    kind : int8 (node,)
+    min_length : float
+        Segments shorter than this (metres, >= 0) whose child is a branching node
+        (kind 1) are contracted; 0 contracts nothing.
+
+    Returns
+    -------
+    parent : int64 (node_kept,)
+        Parent array of the contracted tree over the kept nodes (renumbered; nodes keep
+        their relative order). A node may now have more than two children.
+    index : int64 (node_kept,)
+        Original index of every kept node (take position, radius and kind with it).
+
+    Examples
+    --------
+    >>> parent, index = contract_short_segments(
+    ...     [-1, 0, 1, 2, 2, 1], [[0, 0, 0], [1, 0, 0], [1, 0, 0], [2, 1, 0], [2, -1, 0], [1, 1, 0]],
+    ...     [0, 1, 1, 2, 2, 2])
+    >>> parent.tolist(), index.tolist()
+    ([-1, 0, 1, 1, 1], [0, 1, 3, 4, 5])
+    """
+    parent = _parent_array(parent)
+    if not (np.isfinite(min_length) and min_length >= 0):
+        raise ValueError(f"min_length: must be a finite length >= 0 (metres), got {min_length}")
+    gone = (parent >= 0) & (np.asarray(kind) == KIND_BIFURCATION) & (segment_lengths(parent, position) < min_length)
+    # every contracted node points to its parent, every kept one to itself: the root of a
+    # node in that forest is its nearest kept ancestor (or itself)
+    kept_ancestor = _pointer_jump_root(np.where(gone, parent, np.arange(parent.size)))
+    index = np.flatnonzero(~gone)
+    new = np.full(parent.size, -1, dtype=np.int64)
+    new[index] = np.arange(index.size)
+    up = parent[index]
+    return np.where(up >= 0, new[kept_ancestor[np.maximum(up, 0)]], -1), index
+
+
 def segment_lengths(parent, position) -> np.ndarray:
     """Length of every segment.
 
@@ -307,9 +379,10 @@ def segment_lengths(parent, position) -> np.ndarray:
 def strahler_orders(parent, kind) -> np.ndarray:
     """Conventional Strahler order of every segment.
 
-    Terminal segments have order 1; at a bifurcation, the parent segment has order n + 1
-    if both daughters have order n, else the larger daughter order. An inlet's single
-    child segment is an ordinary segment.
+    Terminal segments have order 1; at a branching node, the parent segment has order
+    n + 1 if the two highest daughter orders are both n, else the highest daughter order
+    (for a bifurcation: n + 1 if both daughters have order n). An inlet's child segments
+    are ordinary segments. Multifurcations (contracted trees) are accepted.
 
     Parameters
     ----------
@@ -327,9 +400,9 @@ def strahler_orders(parent, kind) -> np.ndarray:
     [0, 2, 1, 1]
     """
     parent = _parent_array(parent)
-    check_tree_arrays(parent, kind)
-    table = children_of(parent)
-    c0, c1 = table[:, 0].tolist(), table[:, 1].tolist()
+    check_tree_arrays(parent, kind, multifurcations=True)
+    start, child = _child_lists(parent)
+    start, child = start.tolist(), child.tolist()
     kinds = np.asarray(kind).tolist()
     order = [0] * parent.size
     # Children before parents; a plain loop on Python lists beats per-level NumPy
@@ -339,8 +412,14 @@ def strahler_orders(parent, kind) -> np.ndarray:
         if k == KIND_TERMINAL:
             order[v] = 1
         elif k == KIND_BIFURCATION:
-            a, b = order[c0[v]], order[c1[v]]
-            order[v] = a + 1 if a == b else (a if a > b else b)
+            top = second = 0
+            for c in child[start[v] : start[v + 1]]:
+                o = order[c]
+                if o > top:
+                    top, second = o, top
+                elif o > second:
+                    second = o
+            order[v] = top + 1 if second == top else top
     return np.array(order, dtype=np.int64)
 
 
@@ -411,7 +490,7 @@ def diameter_defined_strahler(parent, radius, kind, max_iter: int = 100, tol: fl
     ([0, 2, 1, 1], 1, True)
     """
     parent = _parent_array(parent)
-    check_tree_arrays(parent, kind, radius=radius)
+    check_tree_arrays(parent, kind, radius=radius, multifurcations=True)
     if max_iter < 1:
         raise ValueError(f"max_iter: must be >= 1, got {max_iter}")
     if not 0 <= tol <= 1:
@@ -715,6 +794,9 @@ class Asymmetry(NamedTuple):
 def asymmetry_ratios(parent, radius, kind, orders) -> Asymmetry:
     """Per bifurcation: D_s/D_p and D_l/D_p with the parent segment's order.
 
+    At a multifurcation (contracted trees) D_s and D_l are the smallest and the largest
+    daughter.
+
     Parameters
     ----------
     parent : int64 (node,)
@@ -736,11 +818,14 @@ def asymmetry_ratios(parent, radius, kind, orders) -> Asymmetry:
     parent = _parent_array(parent)
     radius = np.asarray(radius, dtype=float)
     orders = np.asarray(orders, dtype=np.int64)
-    table = children_of(parent)
-    node = np.flatnonzero(np.asarray(kind) == KIND_BIFURCATION)
+    start, child = _child_lists(parent)
+    has_children = np.flatnonzero(start[1:] > start[:-1])  # reduceat needs non-empty runs
+    r_min = np.minimum.reduceat(radius[child], start[has_children]) if child.size else np.zeros(0)
+    r_max = np.maximum.reduceat(radius[child], start[has_children]) if child.size else np.zeros(0)
+    branching = np.asarray(kind)[has_children] == KIND_BIFURCATION
+    node = has_children[branching]
     rp = radius[node]
-    r0, r1 = radius[table[node, 0]], radius[table[node, 1]]
-    return Asymmetry(node.astype(np.int64), orders[node].copy(), np.minimum(r0, r1) / rp, np.maximum(r0, r1) / rp)
+    return Asymmetry(node.astype(np.int64), orders[node].copy(), r_min[branching] / rp, r_max[branching] / rp)
 
 
 def asymmetry_statistics(asym: Asymmetry, orders=None) -> xr.Dataset:
@@ -781,7 +866,15 @@ def asymmetry_statistics(asym: Asymmetry, orders=None) -> xr.Dataset:
 
 
 def morphometry(
-    parent, position, radius, kind, *, top: int | None = TOP_ORDER, max_iter: int = 100, tol: float = 0.01
+    parent,
+    position,
+    radius,
+    kind,
+    *,
+    top: int | None = TOP_ORDER,
+    max_iter: int = 100,
+    tol: float = 0.01,
+    min_segment_length: float = MIN_SEGMENT_LENGTH,
 ) -> xr.Dataset:
     """Order-wise morphometry of a tree (or forest) as a labelled dataset.
 
@@ -796,6 +889,9 @@ def morphometry(
         (Kassab's trunk order 11); None keeps raw orders (1 = terminal).
     max_iter, tol
         Passed to :func:`diameter_defined_strahler`.
+    min_segment_length : float
+        Segments between branch points shorter than this (metres) are contracted before
+        ordering (:func:`contract_short_segments`; 0 keeps the tree as it is).
 
     Returns
     -------
@@ -805,10 +901,12 @@ def morphometry(
         Per (scheme, order): the variables of :func:`order_statistics` and
         :func:`asymmetry_statistics`. Per scheme: ``order_shift`` (added to the raw
         orders) and ``n_elements``. Per (scheme, node): ``segment_order`` (shifted; 0 at
-        inlets) and ``element_id`` (-1 at inlets). Per node: ``segment_diameter`` and
-        ``segment_length`` (m, 0 at inlets). Attrs: ``dds_iterations``, ``dds_changed_fraction``,
-        ``dds_converged`` (0/1, netCDF-safe), ``dds_tol``, ``n_inlets``, ``n_terminals``, ``n_segments``,
-        ``top_order`` (-1 when unshifted). Every variable has ``units`` and ``long_name``.
+        inlets and contracted segments) and ``element_id`` (-1 there). Per node:
+        ``segment_diameter`` and ``segment_length`` (m, 0 at inlets). Attrs:
+        ``dds_iterations``, ``dds_changed_fraction``, ``dds_converged`` (0/1, netCDF-safe),
+        ``dds_tol``, ``n_inlets``, ``n_terminals``, ``n_segments`` (after contraction),
+        ``n_contracted_segments``, ``min_segment_length``, ``top_order`` (-1 when
+        unshifted). Every variable has ``units`` and ``long_name``.
 
     Examples
     --------
@@ -817,13 +915,16 @@ def morphometry(
     >>> ds.element_count.sel(scheme="strahler").values.tolist(), ds.order.values.tolist()
     ([2, 1], [10, 11])
     """
-    parent = _parent_array(parent)
-    check_tree_arrays(parent, kind, radius=radius, position=position)
-    radius = np.asarray(radius, dtype=float)
-    kind = np.asarray(kind)
+    full_parent = _parent_array(parent)
+    check_tree_arrays(full_parent, kind, radius=radius, position=position)
+    full_diameter = np.where(full_parent >= 0, 2.0 * np.asarray(radius, dtype=float), 0.0)
+    full_length = segment_lengths(full_parent, position)
+    parent, kept = contract_short_segments(full_parent, position, kind, min_segment_length)
+    radius = np.asarray(radius, dtype=float)[kept]
+    kind = np.asarray(kind)[kept]
     seg = np.flatnonzero(parent >= 0)
-    diameter = np.where(parent >= 0, 2.0 * radius, 0.0)
-    length = segment_lengths(parent, position)
+    diameter = full_diameter[kept]
+    length = segment_lengths(parent, np.asarray(position, dtype=float)[kept])
     dds = diameter_defined_strahler(parent, radius, kind, max_iter=max_iter, tol=tol)
     raw = {"diameter_defined": dds.orders, "strahler": strahler_orders(parent, kind)}
     shifted = {k: (shift_orders(v, top, mask=parent >= 0) if top is not None else v) for k, v in raw.items()}
@@ -843,10 +944,18 @@ def morphometry(
             {"units": "1", "long_name": "shift added to the raw orders (1 = terminal)"},
         )
         part["n_elements"] = ((), int(el.order.size), {"units": "1", "long_name": "number of elements"})
-        part["segment_order"] = ("node", orders, {"units": "1", "long_name": "order of the segment ending at the node"})
+        node_order = np.zeros(full_parent.size, dtype=np.int64)
+        node_order[kept] = orders
+        node_element = np.full(full_parent.size, -1, dtype=np.int64)
+        node_element[kept] = el.segment_element
+        part["segment_order"] = (
+            "node",
+            node_order,
+            {"units": "1", "long_name": "order of the segment ending at the node"},
+        )
         part["element_id"] = (
             "node",
-            el.segment_element,
+            node_element,
             {"units": "1", "long_name": "element of the segment ending at the node"},
         )
         parts.append(part)
@@ -862,8 +971,8 @@ def morphometry(
     ds["order"].attrs.update(
         long_name="vessel order" + (f" (shifted: highest = {top})" if top is not None else ""), units="1"
     )
-    ds["segment_diameter"] = ("node", diameter, {"units": "m", "long_name": "segment diameter"})
-    ds["segment_length"] = ("node", length, {"units": "m", "long_name": "segment length"})
+    ds["segment_diameter"] = ("node", full_diameter, {"units": "m", "long_name": "segment diameter"})
+    ds["segment_length"] = ("node", full_length, {"units": "m", "long_name": "segment length"})
     ds.attrs.update(
         dds_iterations=int(dds.n_iter),
         dds_converged=int(bool(dds.converged)),
@@ -872,6 +981,8 @@ def morphometry(
         n_inlets=int((kind == KIND_INLET).sum()),
         n_terminals=int((kind == KIND_TERMINAL).sum()),
         n_segments=int(seg.size),
+        n_contracted_segments=int(full_parent.size - kept.size),
+        min_segment_length=float(min_segment_length),
         top_order=-1 if top is None else int(top),
         ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment (see vasc_pipeline.morphometry); "
         "strahler: conventional Strahler",
