@@ -33,3 +33,8 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
         assert all(r["ns_per_move"]["all"] > 0 for r in records)
     if script.stem == "kernel_throughput":
         assert all(r["moves_per_second"] > 0 for r in records)
+    if script.stem == "fidelity":
+        (row,) = records
+        assert row["n_terminals"] == 40 and row["n_orders"] == len(row["orders"]) >= 2
+        assert 0 <= row["exclusion_share_terminal_segments"] <= 1 and row["cost_exclusion_weighted"] > 0
+        assert sum(row[f"terminal_share_{name}"] for name in ("LCA", "RCA")) == 1

@@ -1,0 +1,233 @@
+"""Fidelity against Kassab 1993: what the finished heart runs' morphometry is made of.
+
+Reads complete run stores laid out as :mod:`time_to_quality` writes them
+(``ROOT/<variant>/x<budget>/runs/*.zarr``) and recomputes, per run, with the package's
+current morphometry (diameter-defined Strahler, zero-length segments contracted, element
+level):
+
+- ``diameter_error_<artery>`` / ``length_error_<artery>``: mean |log10 model/Kassab| over the
+  orders present in both, trunk = 11 (the reduction's alignment), and the same with the
+  terminal order placed on Kassab's order of nearest diameter (``..._terminal_aligned_...``);
+- ``n_orders``, ``diameter_ratio_per_order`` (10^slope of log10 element diameter against
+  order; Kassab's LAD, orders 5-11: 1.91) and per order the element count, segments per
+  element, mean diameter and length (``orders``);
+- the cost balance: C_v, C_w, the weighted exclusion (A_o/A_wv) C_o and the share of C_o
+  carried by terminal segments, the mean pressure drop C_w / Q0 [Pa];
+- the inlet split: per inlet (LCA, RCA) root diameter and share of the terminals (flow);
+- ``cavity_share`` as stored, and ``n_contracted_segments``.
+
+One JSON line per run, then mean ± SE over seeds per (variant, budget, N):
+
+    python benchmarks/fidelity.py /work/bench/ttq /work/bench/fid > fidelity_rows.jsonl
+    python benchmarks/fidelity.py --quick          # a tiny run in a temporary dir: wiring only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ARTERIES = ("RCA", "LAD", "LCX")
+KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
+
+
+def diameter_ratio_per_order(orders, diameters) -> float:
+    """10 ** slope of log10(diameter) against order (least squares)."""
+    orders, diameters = np.asarray(orders, dtype=float), np.asarray(diameters, dtype=float)
+    if orders.size < 2:
+        return float("nan")
+    return float(10 ** np.polyfit(orders, np.log10(diameters), 1)[0])
+
+
+def kassab_ratio() -> float:
+    from vasc_pipeline.reference import kassab_dataset
+
+    lad = kassab_dataset().sel(artery="LAD", level="element")
+    return diameter_ratio_per_order(lad.order.values[KASSAB_FIT_ORDERS], lad.D_mean.values[KASSAB_FIT_ORDERS])
+
+
+def terminal_aligned(morph):
+    """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest diameter."""
+    from vasc_pipeline.reference import kassab_dataset
+
+    dds = morph.sel(scheme="diameter_defined")
+    present = dds.order.values[(dds.element_count > 0).values]
+    lad = kassab_dataset().sel(artery="LAD", level="element")
+    d_low = float(dds.element_diameter_mean.sel(order=present.min()))
+    target = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))])
+    return morph.assign_coords(order=morph.order + (target - int(present.min()))), target - int(present.min())
+
+
+def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
+    """Weighted exclusion cost (A_o/A_wv) pi r^2 sum_v (D_v L_v)^6 of every segment [W]."""
+    from vasc_pipeline import costs
+
+    parent, position, radius = tree["parent"], tree["position"], tree["radius"]
+    counted = (parent >= 0) & (radius > physics["r_cutoff"])
+    out = np.zeros(parent.size)
+    for i in np.flatnonzero(counted):
+        out[i] = np.pi * radius[i] ** 2 * costs.exclusion_sum(position[parent[i]], position[i], tissue)
+    return out * physics["A_o"] / physics["A_wv"]
+
+
+def row_of(path: Path, root: Path) -> dict:
+    from vasc_pipeline import config, engine, morphometry
+    from vasc_pipeline.store import RunStore
+
+    store = RunStore.open(path, mode="r")
+    a = store.attrs
+    variant, budget = path.parent.parent.relative_to(root).parts[-2:]
+    c, physics = a["cost_recomputed"], a["physics"]
+    tree = store.read_tree()
+    parent, kind = tree["parent"], tree["kind"]
+    tissue = engine.build_problem(config.to_run_config(a["config"])).tissue
+    exclusion = exclusion_by_segment(tissue, physics, tree)
+    row = {
+        "variant": variant,
+        "budget": float(budget.removeprefix("x")),
+        "n_terminals": int(a["coords"]["n_terminals"]),
+        "seed": int(a["seed"]),
+        "steps": int(a["steps_done"]),
+        "m_b": float(physics["m_b"]),
+        "r_cutoff": float(physics["r_cutoff"]),
+        "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
+        "cost_supply": float(c["supply"]),
+        "cost_volume": float(c["volume"]),
+        "cost_power": float(c["power"]),
+        "cost_exclusion_weighted": float(exclusion.sum()),
+        "exclusion_share_terminal_segments": float(exclusion[kind == 2].sum() / max(exclusion.sum(), 1e-300)),
+        "pressure_drop_mean_Pa": float(c["power"] / physics["total_flow"]),
+    }
+    inlet_of = morphometry.inlet_of(parent)
+    for name, inlet in zip(tissue.inlet_names, np.flatnonzero(parent < 0)):
+        root_segment = np.flatnonzero(parent == inlet)[0]
+        row[f"root_diameter_um_{name}"] = float(2e6 * tree["radius"][root_segment])
+        row[f"terminal_share_{name}"] = float(np.mean(inlet_of[kind == 2] == inlet))
+    morph = morphometry.morphometry(parent, tree["position"], tree["radius"], kind)
+    dds = morph.sel(scheme="diameter_defined")
+    present = (dds.element_count > 0).values
+    orders = dds.order.values[present]
+    row["n_contracted_segments"] = int(morph.attrs["n_contracted_segments"])
+    row["n_orders"] = int(present.sum())
+    row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
+    row["orders"] = {
+        int(o): {
+            "elements": int(dds.element_count.sel(order=o)),
+            "segments_per_element": float(dds.segments_per_element.sel(order=o)),
+            "diameter_um": float(dds.element_diameter_mean.sel(order=o)) * 1e6,
+            "length_mm": float(dds.element_length_mean.sel(order=o)) * 1e3,
+        }
+        for o in orders
+    }
+    aligned, row["terminal_aligned_shift"] = terminal_aligned(morph)
+    for artery in ARTERIES:
+        for suffix, ds in (("", morph), ("_terminal_aligned", aligned)):
+            table = morphometry.compare_with_kassab(ds, artery)
+            row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
+            row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    row["store"] = str(path)
+    return row
+
+
+SUMMARY = (
+    "n_orders",
+    "diameter_ratio_per_order",
+    *(f"diameter_error_{a}" for a in ARTERIES),
+    *(f"diameter_error_terminal_aligned_{a}" for a in ARTERIES),
+    *(f"length_error_{a}" for a in ARTERIES),
+    "cost_volume",
+    "cost_power",
+    "cost_exclusion_weighted",
+    "exclusion_share_terminal_segments",
+    "pressure_drop_mean_Pa",
+)
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """Mean and SE over seeds per (variant, budget, N); inlet columns included."""
+    table = []
+    for key in sorted({(r["variant"], r["budget"], r["n_terminals"]) for r in rows}):
+        sel = [r for r in rows if (r["variant"], r["budget"], r["n_terminals"]) == key]
+        entry = {"variant": key[0], "budget": key[1], "n_terminals": key[2], "seeds": len(sel)}
+        names = [*SUMMARY, *sorted(k for k in sel[0] if k.startswith(("root_diameter", "terminal_share")))]
+        for name in names:
+            v = np.array([r[name] for r in sel], dtype=float)
+            entry[name] = float(v.mean())
+            entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+        table.append(entry)
+    return table
+
+
+def _pm(entry: dict, name: str, fmt: str = ".3f") -> str:
+    se = entry[name + "_se"]
+    return f"{entry[name]:{fmt}}" + (f"±{se:{fmt}}" if np.isfinite(se) else "")
+
+
+def print_table(table: list[dict]) -> None:
+    print(f"\nmean ± SE over seeds; Kassab LAD diameter ratio per order (orders 5-11): {kassab_ratio():.2f}")
+    print("diameter / length error: mean |log10 model/Kassab| RCA, LAD, LCX; trunk = 11 unless 'aligned'")
+    for t in table:
+        diam = " ".join(_pm(t, f"diameter_error_{a}") for a in ARTERIES)
+        aligned = " ".join(_pm(t, f"diameter_error_terminal_aligned_{a}") for a in ARTERIES)
+        length = " ".join(_pm(t, f"length_error_{a}") for a in ARTERIES)
+        inlets = " ".join(
+            f"{name} D {t['root_diameter_um_' + name]:.0f} um, share {t['terminal_share_' + name]:.2f}"
+            for name in (k.removeprefix("terminal_share_") for k in t if k.startswith("terminal_share_"))
+            if not name.endswith("_se")
+        )
+        print(
+            f"{t['variant']} x{t['budget']:g} N={t['n_terminals']} ({t['seeds']} seeds): "
+            f"orders {_pm(t, 'n_orders', '.2f')}, ratio/order {_pm(t, 'diameter_ratio_per_order', '.2f')}\n"
+            f"    diameter {diam} | aligned {aligned}\n    length {length}\n"
+            f"    C_v {t['cost_volume']:.3g} W, C_w {t['cost_power']:.3g} W, (A_o/A_wv) C_o "
+            f"{t['cost_exclusion_weighted']:.3g} W ({t['exclusion_share_terminal_segments']:.4f} on terminal "
+            f"segments), mean pressure drop {t['pressure_drop_mean_Pa'] / 1e3:.2f} kPa; {inlets}"
+        )
+
+
+def stores_under(roots: list[Path]) -> list[tuple[Path, Path]]:
+    from vasc_pipeline.store import RunStore
+
+    found = []
+    for root in roots:
+        for path in sorted(root.glob("*/x*/runs/*.zarr")):
+            if re.fullmatch(r"x[0-9.]+", path.parent.parent.name) and RunStore.open(path, "r").status == "complete":
+                found.append((path, root))
+    return found
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("roots", nargs="*", type=Path, help="directories laid out as time_to_quality's --out")
+    parser.add_argument("--quick", action="store_true", help="one tiny run (N = 40) in a temporary dir")
+    args = parser.parse_args(argv)
+    tmp = None
+    if args.quick:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from time_to_quality import jobs_for, run_one
+
+        tmp = tempfile.TemporaryDirectory()
+        args.roots = [Path(tmp.name)]
+        for job in jobs_for(args.roots[0], "fast_v1", 1.0, 40, [0], 20_000, ["anneal.trace_every=10000"]):
+            run_one(job)
+    if not args.roots:
+        parser.error("give at least one directory of runs (or --quick)")
+    rows = []
+    for path, root in stores_under(args.roots):
+        rows.append(row_of(path, root))
+        print(json.dumps(rows[-1]), flush=True)
+    table = summarise(rows)
+    print_table(table)
+    if tmp is not None:
+        tmp.cleanup()
+    return table
+
+
+if __name__ == "__main__":
+    main()
