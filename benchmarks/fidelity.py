@@ -35,6 +35,7 @@ import numpy as np
 
 ARTERIES = ("RCA", "LAD", "LCX")
 KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
+KASSAB_TOP_ORDER = {"RCA": 11, "LAD": 11, "LCX": 10}  # each artery's trunk order in Tables 1-3
 
 
 def diameter_ratio_per_order(orders, diameters) -> float:
@@ -74,6 +75,45 @@ def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
     for i in np.flatnonzero(counted):
         out[i] = np.pi * radius[i] ** 2 * costs.exclusion_sum(position[parent[i]], position[i], tissue)
     return out * physics["A_o"] / physics["A_wv"]
+
+
+def subtree(tree: dict, head: int) -> dict:
+    """The tree below node ``head`` with an inlet of its own at ``head``'s parent node."""
+    from vasc_pipeline import morphometry
+
+    parent = tree["parent"].copy()
+    up = int(parent[head])
+    parent[head] = -1
+    nodes = np.flatnonzero(morphometry.inlet_of(parent) == head)
+    new = np.full(parent.size, -1, dtype=np.int64)
+    new[nodes] = np.arange(1, nodes.size + 1)
+    return {
+        "parent": np.concatenate(([-1], np.where(parent[nodes] >= 0, new[np.maximum(parent[nodes], 0)], 0))),
+        "position": np.vstack([tree["position"][up], tree["position"][nodes]]),
+        "radius": np.concatenate(([0.0], tree["radius"][nodes])),
+        "kind": np.concatenate(([0], tree["kind"][nodes])).astype(np.int8),
+    }
+
+
+def per_artery_trees(tree: dict, inlet_names) -> dict:
+    """RCA, LAD and LCX as separate trees: the LCA's two widest daughters at its first branch point.
+
+    Kassab ordered each artery on its own; the LAD and LCX are the branches of the left
+    main (the LCA's root segment, contracted when the first branch point is on the ostium).
+    """
+    from vasc_pipeline import morphometry
+
+    parent, kind = tree["parent"], tree["kind"]
+    inlets = dict(zip(inlet_names, np.flatnonzero(parent < 0)))
+    contracted, index = morphometry.contract_short_segments(parent, tree["position"], kind)
+    lca = int(np.flatnonzero(index == inlets["LCA"])[0])
+    below = np.flatnonzero(contracted == lca)
+    if below.size == 1:  # the left main: its children are the LAD and LCX
+        below = np.flatnonzero(contracted == below[0])
+    widest = below[np.argsort(-tree["radius"][index[below]], kind="stable")][:2]
+    out = {"RCA": subtree(tree, int(np.flatnonzero(parent == inlets["RCA"])[0]))}
+    out["LAD"], out["LCX"] = (subtree(tree, int(index[b])) for b in widest)
+    return out
 
 
 def row_of(path: Path, root: Path) -> dict:
@@ -131,6 +171,14 @@ def row_of(path: Path, root: Path) -> dict:
             table = morphometry.compare_with_kassab(ds, artery)
             row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
             row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    if {"LCA", "RCA"} <= set(tissue.inlet_names):
+        for artery, sub in per_artery_trees(tree, tissue.inlet_names).items():
+            top = int(KASSAB_TOP_ORDER[artery])
+            table = morphometry.compare_with_kassab(
+                morphometry.morphometry(sub["parent"], sub["position"], sub["radius"], sub["kind"], top=top), artery
+            )
+            row[f"diameter_error_per_artery_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
+            row[f"length_error_per_artery_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
     row["store"] = str(path)
     return row
 
@@ -140,7 +188,9 @@ SUMMARY = (
     "diameter_ratio_per_order",
     *(f"diameter_error_{a}" for a in ARTERIES),
     *(f"diameter_error_terminal_aligned_{a}" for a in ARTERIES),
+    *(f"diameter_error_per_artery_{a}" for a in ARTERIES),
     *(f"length_error_{a}" for a in ARTERIES),
+    *(f"length_error_per_artery_{a}" for a in ARTERIES),
     "cost_volume",
     "cost_power",
     "cost_exclusion_weighted",
@@ -155,7 +205,8 @@ def summarise(rows: list[dict]) -> list[dict]:
     for key in sorted({(r["variant"], r["budget"], r["n_terminals"]) for r in rows}):
         sel = [r for r in rows if (r["variant"], r["budget"], r["n_terminals"]) == key]
         entry = {"variant": key[0], "budget": key[1], "n_terminals": key[2], "seeds": len(sel)}
-        names = [*SUMMARY, *sorted(k for k in sel[0] if k.startswith(("root_diameter", "terminal_share")))]
+        names = [n for n in SUMMARY if n in sel[0]]
+        names += sorted(k for k in sel[0] if k.startswith(("root_diameter", "terminal_share")))
         for name in names:
             v = np.array([r[name] for r in sel], dtype=float)
             entry[name] = float(v.mean())
@@ -175,7 +226,9 @@ def print_table(table: list[dict]) -> None:
     for t in table:
         diam = " ".join(_pm(t, f"diameter_error_{a}") for a in ARTERIES)
         aligned = " ".join(_pm(t, f"diameter_error_terminal_aligned_{a}") for a in ARTERIES)
+        separate = " ".join(_pm(t, f"diameter_error_per_artery_{a}") for a in ARTERIES)
         length = " ".join(_pm(t, f"length_error_{a}") for a in ARTERIES)
+        length_separate = " ".join(_pm(t, f"length_error_per_artery_{a}") for a in ARTERIES)
         inlets = " ".join(
             f"{name} D {t['root_diameter_um_' + name]:.0f} um, share {t['terminal_share_' + name]:.2f}"
             for name in (k.removeprefix("terminal_share_") for k in t if k.startswith("terminal_share_"))
@@ -184,7 +237,8 @@ def print_table(table: list[dict]) -> None:
         print(
             f"{t['variant']} x{t['budget']:g} N={t['n_terminals']} ({t['seeds']} seeds): "
             f"orders {_pm(t, 'n_orders', '.2f')}, ratio/order {_pm(t, 'diameter_ratio_per_order', '.2f')}\n"
-            f"    diameter {diam} | aligned {aligned}\n    length {length}\n"
+            f"    diameter {diam} | terminal-aligned {aligned} | per artery {separate}\n"
+            f"    length {length} | per artery {length_separate}\n"
             f"    C_v {t['cost_volume']:.3g} W, C_w {t['cost_power']:.3g} W, (A_o/A_wv) C_o "
             f"{t['cost_exclusion_weighted']:.3g} W ({t['exclusion_share_terminal_segments']:.4f} on terminal "
             f"segments), mean pressure drop {t['pressure_drop_mean_Pa'] / 1e3:.2f} kPa; {inlets}"
