@@ -1,4 +1,4 @@
-"""The coronary substrate (vasc_pipeline.heart): mass, shape, inlets, bad input."""
+"""The coronary substrate (vasc_pipeline.tissue.heart): mass, shape, inlets, bad input."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from vasc_pipeline import heart
-from vasc_pipeline.tissue import TissueError, build_tissue
+from vasc_pipeline.tissue import TissueError, build_tissue, heart
 
 TARGET_G = 218.0
 DENSITY = 1.06e3
@@ -65,7 +64,7 @@ def test_dimensions_physiological(dims):
 
 
 def test_via_build_tissue_ignores_other_keys(caplog):
-    with caplog.at_level(logging.INFO, logger="vasc_pipeline.heart"):
+    with caplog.at_level(logging.INFO, logger="vasc_pipeline.tissue.heart"):
         t = build_tissue(
             "heart", 300, mass_g=218.0, density=1.06e3, voxel_size=None, radius=0.02, side=0.1, q_required=None
         )

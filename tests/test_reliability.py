@@ -400,7 +400,7 @@ def test_9_slurm_scheduler_uses_temporary_tls_unless_allowed_insecure(tmp_path):
     pytest.importorskip("dask_jobqueue")
     pytest.importorskip("cryptography")
     cluster = config.compose(["cluster=slurm", "cluster.dashboard_address=null"]).cluster
-    cl = orchestrate.slurm_cluster(cluster, 1, tmp_path)
+    cl = orchestrate.slurm_cluster(cluster, tmp_path)
     try:
         assert cl.scheduler_address.startswith("tls://")
         script = cl.job_script()
@@ -413,7 +413,7 @@ def test_9_slurm_scheduler_uses_temporary_tls_unless_allowed_insecure(tmp_path):
     finally:
         cl.close()
     cluster.allow_insecure = True
-    cl = orchestrate.slurm_cluster(cluster, 1, tmp_path)
+    cl = orchestrate.slurm_cluster(cluster, tmp_path)
     try:
         assert cl.scheduler_address.startswith("tcp://")
     finally:

@@ -1,0 +1,1 @@
+"""vasc_pipeline: globally optimised arterial trees by simulated annealing (Keelan, Chung & Hague)."""

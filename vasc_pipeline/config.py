@@ -52,7 +52,7 @@ SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the gen
 # Keys added after runs were already stored, with the value that does what the code did
 # before the key existed. A stored config that lacks such a key is the same run as a
 # requested config holding that value, so a new option never invalidates old results
-# (store.hashed_config leaves these keys out at these values). A key whose default changed
+# (identity.hashed_config leaves these keys out at these values). A key whose default changed
 # the model (tissue.exclude_cavities: True) is listed with its old behaviour, so runs made
 # before it are, rightly, a different configuration.
 KEYS_ADDED_LATER: dict[str, Any] = {

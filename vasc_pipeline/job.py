@@ -24,20 +24,22 @@ import numpy as np
 
 from . import engine, kernel
 from .costs import full_costs
-from .store import STATUS_COMPLETE, CheckpointWarning, RunStore, run_lock
+from .store import STATUS_COMPLETE, CheckpointWarning, RunStore, is_empty_leftover, run_lock
 from .sweep import Job
 
-__all__ = ["run_job", "ensure_store"]
+__all__ = ["run_job", "ensure_store", "create_store"]
 
 Reporter = Callable[[Mapping[str, Any]], None]
 
 
-def ensure_store(job: Job, total_steps: int) -> RunStore:
-    """Open the job's store, checking its config, or create it (status "running")."""
-    if RunStore.exists(job.store):
-        store = RunStore.open(job.store)
-        store.check_config(job.config)
-        return store
+def create_store(job: Job, total_steps: int) -> RunStore:
+    """Create the job's store (status "running"); the one place a run store is made from a job.
+
+    The orchestrator creates the stores of new runs before dispatch; :func:`ensure_store`
+    creates one only when the job is run on its own.
+    """
+    if is_empty_leftover(job.store):  # a crash between mkdir and the store's zarr.json
+        Path(job.store).rmdir()
     return RunStore.create(
         job.store,
         run_id=job.run_id,
@@ -46,6 +48,15 @@ def ensure_store(job: Job, total_steps: int) -> RunStore:
         coords=job.coords,
         total_steps=total_steps,
     )
+
+
+def ensure_store(job: Job, total_steps: int) -> RunStore:
+    """Open the job's store, checking its config, or create it (status "running")."""
+    if RunStore.exists(job.store):
+        store = RunStore.open(job.store)
+        store.check_config(job.config)
+        return store
+    return create_store(job, total_steps)
 
 
 def _summary(

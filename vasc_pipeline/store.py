@@ -30,28 +30,27 @@ flip one key (the root ``zarr.json``, i.e. the root attributes) that makes them 
   ``checksums``, written with ``status="complete"``); :func:`verify_store` checks a whole store
   before a sweep or the reduction uses it and names a damaged one (:class:`StoreDamaged`).
 
-One writer per store: :func:`run_lock` holds an ``fcntl`` lock on ``runs/.locks/<run_id>.lock``
-while a job writes (a worker the scheduler gave up on may still be running).
+One writer per store: :func:`run_lock` holds an ``fcntl`` lock (:func:`file_lock`, which the
+sweep's output_dir lock uses too) on ``runs/.locks/<run_id>.lock`` while a job writes (a
+worker the scheduler gave up on may still be running).
 """
 
 from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
-import json
 import math
 import os
 import warnings
-import zlib
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import IO, Any, Iterator, Mapping
 
 import numpy as np
 import zarr
 
-from .config import KEYS_ADDED_LATER, ConfigError
+from .checkpoints import CHECKPOINTS, Checkpoint, CheckpointsMixin, CheckpointWarning, crc32
+from .config import ConfigError
+from .identity import SWEEP_AXES, config_differences, config_hash, hashed_config, identity_differences
 
 __all__ = [
     "RunStore",
@@ -63,6 +62,7 @@ __all__ = [
     "is_empty_leftover",
     "run_path",
     "run_lock",
+    "file_lock",
     "config_hash",
     "hashed_config",
     "config_differences",
@@ -77,15 +77,7 @@ __all__ = [
 RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
 FORMAT = "vasc_pipeline.run/1"
-CHECKPOINTS = "checkpoints"
 TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small files
-
-# Config sections that do not change a run's result: where it is written, how often it
-# checkpoints, and how the sweep/cluster around it is organised. Everything else does.
-_UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
-# The sweep axes (flattened config keys): the only settings in which the runs of one output_dir
-# may differ; everything else in it is one configuration (a cell is never a mix of physics).
-SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")
 
 # (name, dtype, units, long_name) of the trace variables; "step" is the dimension.
 TRACE_FIELDS = (
@@ -108,10 +100,6 @@ class StoreError(OSError):
 
 class StoreDamaged(StoreError):
     """A run store that fails its checks (:func:`verify_store`): the message says what is wrong and what to do."""
-
-
-class CheckpointWarning(UserWarning):
-    """A checkpoint failed its checks and an older one (or a fresh start) is used instead."""
 
 
 def is_empty_leftover(path: str | os.PathLike) -> bool:
@@ -149,6 +137,22 @@ def run_path(output_dir: str | os.PathLike, run_id: str) -> Path:
 
 
 @contextlib.contextmanager
+def file_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[IO[str]]:
+    """Open ``path`` (created if absent, its content kept) and hold an exclusive ``fcntl`` lock on it.
+
+    The lock is released on exit, and by the kernel when the process dies (even on SIGKILL).
+    Without ``wait`` a lock held by another process raises BlockingIOError at once. Yields
+    the open file (mode ``a+``) for a holder that records itself in it.
+    """
+    with open(path, "a+") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        try:
+            yield fh
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
 def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
     """Hold an exclusive lock on ``runs/.locks/<run_id>.lock`` (released on exit or process death).
 
@@ -158,84 +162,12 @@ def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
     path = Path(path)
     lock_path = path.parent / ".locks" / (path.name.removesuffix(".zarr") + ".lock")
     lock_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(lock_path, "a+") as fh:
+    with contextlib.ExitStack() as stack:
         try:
-            fcntl.flock(fh, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+            stack.enter_context(file_lock(lock_path, wait))
         except BlockingIOError as exc:
             raise StoreError(f"run store {str(path)!r} is being written by another process") from exc
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
-
-
-def hashed_config(config: Mapping[str, Any]) -> dict:
-    """The part of a run config that determines its result (see ``_UNHASHED``).
-
-    Keys added to the schema later (:data:`vasc_pipeline.config.KEYS_ADDED_LATER`) are left
-    out where they hold the value that reproduces the older code, so stores written before
-    they existed keep their identity.
-    """
-    out = {k: v for k, v in config.items() if k not in _UNHASHED}
-    for dotted, neutral in KEYS_ADDED_LATER.items():
-        *parents, leaf = dotted.split(".")
-        node = out
-        for name in parents:
-            node = node.get(name) if isinstance(node, Mapping) else None
-        if isinstance(node, Mapping) and leaf in node and node[leaf] == neutral:
-            node = out
-            for name in parents:  # copy the path before removing, the caller's config stays intact
-                node[name] = dict(node[name])
-                node = node[name]
-            del node[leaf]
-    return out
-
-
-def config_hash(config: Mapping[str, Any]) -> str:
-    """SHA-256 of the result-determining config, canonical JSON (sorted keys)."""
-    text = json.dumps(hashed_config(config), sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
-    if isinstance(tree, Mapping):
-        out: dict[str, Any] = {}
-        for k, v in tree.items():
-            out.update(_flatten(v, f"{prefix}{k}."))
-        return out
-    return {prefix[:-1]: tree}
-
-
-def config_differences(
-    stored: Mapping[str, Any], requested: Mapping[str, Any], ignore: tuple[str, ...] = ()
-) -> list[str]:
-    """Human-readable ``key: stored -> requested`` lines for every result-determining difference
-    (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
-    a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
-
-    def ignored(key: str) -> bool:  # an entry ending in "." ignores a whole section
-        return any(key == i or (i.endswith(".") and key.startswith(i)) for i in ignore)
-
-    return [
-        f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
-        for k in sorted(set(a) | set(b))
-        if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")
-    ]
-
-
-def _method(config: Mapping[str, Any]) -> str:
-    return str((config.get("method") or {}).get("name") or "anneal")
-
-
-def identity_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
-    """What keeps two runs out of one output_dir: every difference but the sweep axes.
-
-    Runs of different methods (``method=cco`` beside the anneal: the comparison the
-    reduction's ``method`` dimension is for) share everything but the sections only one of
-    them uses, ``anneal`` and ``method``.
-    """
-    ignore = SWEEP_AXES + (("anneal.", "method.") if _method(stored) != _method(requested) else ())
-    return config_differences(stored, requested, ignore=ignore)
+        yield
 
 
 def _jsonable(value: Any) -> Any:
@@ -252,23 +184,12 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def _crc(data: np.ndarray) -> int:
-    return zlib.crc32(np.ascontiguousarray(data).view(np.uint8).reshape(-1).data)
+class RunStore(CheckpointsMixin):
+    """One run's Zarr store. Create with :meth:`create`, reopen with :meth:`open`.
 
-
-@dataclass
-class Checkpoint:
-    """A verified checkpoint: the state arrays and where the run stood."""
-
-    name: str
-    arrays: dict[str, np.ndarray]
-    step: int
-    trace_length: int
-    wall_seconds: float
-
-
-class RunStore:
-    """One run's Zarr store. Create with :meth:`create`, reopen with :meth:`open`."""
+    The checkpoint methods (:meth:`write_checkpoint`, :meth:`load_checkpoint`,
+    :meth:`record_resume`) are :class:`vasc_pipeline.checkpoints.CheckpointsMixin`'s.
+    """
 
     def __init__(self, path: Path, group: zarr.Group) -> None:
         self.path = Path(path)
@@ -491,111 +412,8 @@ class RunStore:
         if arrays["trace/step"].shape != (n,):
             raise StoreError(f"its trace holds {arrays['trace/step'].shape[0]} records, {n} committed")
         for key, crc in (attrs.get("checksums") or {}).items():
-            if key not in arrays or _crc(arrays[key]) != crc:
+            if key not in arrays or crc32(arrays[key]) != crc:
                 raise StoreError(f"array {key!r} fails its CRC-32 check")
-
-    # -- checkpoints ------------------------------------------------------------------------
-
-    def _checkpoint_names(self) -> list[str]:
-        # From the directory listing, not zarr's member listing: that one parses every
-        # member's metadata and fails as a whole on one damaged checkpoint.
-        root = self.path / CHECKPOINTS
-        return sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
-
-    def write_checkpoint(
-        self, arrays: Mapping[str, np.ndarray], *, step: int, trace_length: int, wall_seconds: float
-    ) -> str:
-        """Write a new checkpoint group, flip the root pointer to it, prune; returns its name."""
-        names = self._checkpoint_names()
-        seq = int(names[-1][1:]) + 1 if names else 1
-        name = f"c{seq:09d}"
-        group = self.group.require_group(CHECKPOINTS).create_group(name)
-        manifest = {}
-        for key, data in arrays.items():
-            data = np.ascontiguousarray(data)
-            arr = group.create_array(key, shape=data.shape, dtype=data.dtype, chunks=data.shape or None)
-            arr[...] = data
-            manifest[key] = {"shape": list(data.shape), "dtype": data.dtype.str, "crc32": _crc(data)}
-        # The manifest is the group's last key: a checkpoint without one is incomplete.
-        group.update_attributes(
-            {
-                "manifest": manifest,
-                "step": int(step),
-                "trace_length": int(trace_length),
-                "wall_seconds": float(wall_seconds),
-            }
-        )
-        previous = self.group.attrs.get("checkpoint")
-        self._set_attrs(
-            checkpoint=name, steps_done=int(step), trace_length=int(trace_length), wall_seconds=float(wall_seconds)
-        )
-        # Keep the new checkpoint and the one committed before it (the fallback); anything
-        # else is older or a partial leftover of a crashed write.
-        for n in names:
-            if n != previous:
-                del self.group[CHECKPOINTS][n]
-        return name
-
-    def _read_checkpoint(self, name: str) -> Checkpoint:
-        """Read and verify one checkpoint; raises ValueError (or a zarr/codec error) when bad."""
-        group = self.group[f"{CHECKPOINTS}/{name}"]
-        meta = dict(group.attrs)
-        manifest = meta.get("manifest")
-        if not manifest:
-            raise ValueError("no manifest (written partially)")
-        arrays = {}
-        for key, info in manifest.items():
-            data = group[key][...]
-            if list(data.shape) != info["shape"] or data.dtype.str != info["dtype"]:
-                raise ValueError(
-                    f"array {key!r} has shape {data.shape} {data.dtype.str}, expected "
-                    f"{tuple(info['shape'])} {info['dtype']}"
-                )
-            if _crc(data) != info["crc32"]:
-                raise ValueError(f"array {key!r} fails its CRC-32 check")
-            arrays[key] = data
-        return Checkpoint(name, arrays, int(meta["step"]), int(meta["trace_length"]), float(meta["wall_seconds"]))
-
-    def load_checkpoint(self) -> Checkpoint | None:
-        """The newest good checkpoint at or before the root pointer, or None (start afresh).
-
-        A checkpoint that fails to read or verify is reported with a :class:`CheckpointWarning`
-        and the previous one is tried.
-        """
-        current = self.group.attrs.get("checkpoint")
-        if current is None:
-            return None
-        names = [n for n in self._checkpoint_names() if n <= current]
-        if current not in names:
-            warnings.warn(f"{self.path}: checkpoint {current} is missing", CheckpointWarning, stacklevel=2)
-        for name in reversed(names):
-            try:
-                return self._read_checkpoint(name)
-            except Exception as exc:  # any failure to read or verify means: not a good checkpoint
-                warnings.warn(
-                    f"{self.path}: checkpoint {name} is truncated or corrupted ({exc}); "
-                    "falling back to the previous good checkpoint",
-                    CheckpointWarning,
-                    stacklevel=2,
-                )
-        warnings.warn(
-            f"{self.path}: no good checkpoint left; the run restarts from step 0", CheckpointWarning, stacklevel=2
-        )
-        return None
-
-    def record_resume(self, checkpoint: Checkpoint | None) -> None:
-        """Note in the attributes where this session starts (step 0 for a fresh start)."""
-        entry = {"step": checkpoint.step if checkpoint else 0, "checkpoint": checkpoint.name if checkpoint else None}
-        resumes = list(self.group.attrs.get("resumes", [])) + [entry]
-        if checkpoint is None:  # a restart from scratch also forgets any committed progress
-            self._set_attrs(resumes=resumes, checkpoint=None, steps_done=0, trace_length=0, wall_seconds=0.0)
-        else:
-            self._set_attrs(
-                resumes=resumes,
-                steps_done=checkpoint.step,
-                trace_length=checkpoint.trace_length,
-                wall_seconds=checkpoint.wall_seconds,
-            )
 
     # -- completion -------------------------------------------------------------------------
 
@@ -642,7 +460,7 @@ class RunStore:
             arr[...] = data
         # CRC-32 of what the run produced (tree and committed trace), read back as stored, in the
         # same attribute write that makes the run complete: verify() checks them.
-        checksums = {key: _crc(data) for key, data in self._final_arrays(int(trace_length)).items()}
+        checksums = {key: crc32(data) for key, data in self._final_arrays(int(trace_length)).items()}
         self._set_attrs(
             status=STATUS_COMPLETE,
             checkpoint=None,

@@ -1,4 +1,4 @@
-"""The paper's coronary substrate: a two-ventricle heart of 218 g (SPEC sections 2, 3).
+"""The paper's coronary substrate: a two-ventricle heart of 218 g, tissue ``heart`` (SPEC sections 2, 3).
 
 Keelan, Chung & Hague model the myocardium as "an ellipsoidal human heart muscle of mass
 218 g": the left ventricle (LV) a thick-walled ellipsoid, the right ventricle (RV) a
@@ -62,7 +62,7 @@ import numbers
 
 import numpy as np
 
-from .tissue import Tissue, TissueError, default_voxel_size, voxelize
+from .grid import Tissue, TissueError, default_voxel_size, voxelize
 
 __all__ = ["heart_tissue", "heart_dimensions", "RV_EXPONENT", "DEFAULT_MASS_G", "DEFAULT_DENSITY"]
 

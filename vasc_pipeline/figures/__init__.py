@@ -1,0 +1,85 @@
+"""Figures of a reduced sweep (matplotlib, Agg backend, PNG into ``<output_dir>/figures/``).
+
+:func:`make_figures` draws everything from the summary DataTree of
+:mod:`vasc_pipeline.summary` (and, for the tree pictures, the best runs' stores)::
+
+    import xarray as xr
+    from vasc_pipeline.figures import make_figures
+    make_figures(xr.open_datatree("results/smoke/summary.zarr", engine="zarr"), "results/smoke")
+
+Files (each only when the sweep has what it needs):
+
+- ``morphometry_vs_kassab.png``: element diameter and length against order (log y, SE
+  bars) with Kassab's RCA, LAD and LCX; left the largest N, right every N.
+- ``asymmetry.png``: D_s/D_p and D_l/D_p against parent order, every N, with the symmetric
+  value 2^(-1/gamma).
+- ``mb_effect.png`` (several m_b): diameter, length and both ratios against order for
+  every m_b at the largest N.
+- ``cost_traces.png``: annealed total cost against step, all seeds, one panel per cell.
+- ``convergence.png`` (a steps axis): mean final cost ± standard error against steps.
+- ``tree_<run_id>.png``: the best tree of every cell in projection, line width by radius,
+  colour by inlet, tissue outline from the mask.
+
+Units in the plots follow Kassab's tables (diameter in um, length in mm); the data stay SI.
+The figures live in :mod:`~vasc_pipeline.figures.orders`, :mod:`~vasc_pipeline.figures.costs` and
+:mod:`~vasc_pipeline.figures.trees`, their shared style in :mod:`~vasc_pipeline.figures.style`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import xarray as xr
+
+from .costs import plot_convergence, plot_cost_traces
+from .orders import plot_asymmetry, plot_mb_effect, plot_morphometry
+from .style import REFERENCE_M_B, cell_dims, cell_points, cell_title
+from .trees import plot_tree
+
+__all__ = [
+    "make_figures",
+    "plot_morphometry",
+    "plot_asymmetry",
+    "plot_mb_effect",
+    "plot_cost_traces",
+    "plot_convergence",
+    "plot_tree",
+    "REFERENCE_M_B",
+]
+
+FIGURES_DIR = "figures"
+
+
+def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
+    """Draw every figure that the sweep supports into ``<output_dir>/figures/``; returns the paths.
+
+    Parameters
+    ----------
+    summary : xarray.DataTree
+        From :func:`vasc_pipeline.summary.build_summary` or ``xarray.open_datatree(summary.zarr)``.
+    output_dir : path
+        The sweep's output directory (the tree pictures read ``runs/<run_id>.zarr``).
+    """
+    from ..store import run_path
+
+    out = Path(output_dir) / FIGURES_DIR
+    paths = []
+    for func, name in (
+        (plot_morphometry, "morphometry_vs_kassab.png"),
+        (plot_asymmetry, "asymmetry.png"),
+        (plot_mb_effect, "mb_effect.png"),
+        (plot_cost_traces, "cost_traces.png"),
+        (plot_convergence, "convergence.png"),
+    ):
+        p = func(summary, out / name)
+        if p is not None:
+            paths.append(p)
+    morph = summary["morphometry"].to_dataset()
+    for point in cell_points(morph, cell_dims(summary)):
+        run_id = str(morph["best_run_id"].sel(point).values)
+        if not run_id:
+            continue
+        cost = float(morph["best_cost"].sel(point))
+        title = f"{run_id}: best of {int(morph['n_seeds'].sel(point))} seeds, cost {cost:.4g} ({cell_title(point)})"
+        paths.append(plot_tree(run_path(output_dir, run_id), out / f"tree_{run_id}.png", title))
+    return paths
