@@ -34,6 +34,7 @@ __all__ = [
     "select_trees",
     "contract_short_segments",
     "segment_lengths",
+    "terminals_downstream",
 ]
 
 KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
@@ -310,3 +311,21 @@ def segment_lengths(parent, position) -> np.ndarray:
     seg = np.flatnonzero(parent >= 0)
     length[seg] = np.linalg.norm(position[seg] - position[parent[seg]], axis=-1)
     return length
+
+
+def terminals_downstream(parent, kind) -> np.ndarray:
+    """int64 (node,) number of terminals downstream of every node (1 at terminals; an inlet counts its tree).
+
+    Raises
+    ------
+    ValueError
+        If the parent array is not a forest (bad index or a cycle).
+    """
+    parent = _parent_array(parent)
+    count = (np.asarray(kind) == KIND_TERMINAL).astype(np.int64)
+    # Deepest nodes first: each node adds its (finished) count to its parent's.
+    for v in reversed(topological_order(parent).tolist()):
+        p = parent[v]
+        if p >= 0:
+            count[p] += count[v]
+    return count
