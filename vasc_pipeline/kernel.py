@@ -13,7 +13,7 @@ the generator state, counters and step sizes. Everything a resumed run needs is 
 temperature and every random draw depend only on the step number and the saved state, so
 S steps in one block or any split of blocks give bit-identical trees.
 
-Cost term order in ``costs``: volume, power, supply, exclusion, pressure (unscaled).
+Cost term order in ``costs``: :data:`vasc_pipeline.costs.COST_TERMS` (unscaled).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from collections import namedtuple
 import numpy as np
 
 from ._jit import jit, jit_norc, jit_norc_inline
+from .costs import COST_TERMS
+from .physics import TABLE_EXCLUSION, TABLE_FLOW, TABLE_POWER, TABLE_RESISTANCE, TABLE_VOLUME
 from .rng import next_below, next_double
 
 Model = namedtuple(
@@ -113,9 +115,12 @@ State = namedtuple(
 ) = range(12)
 N_COUNTERS = 12
 
-VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = range(5)
+# Indices into State.costs: the order of costs.COST_TERMS (their one home); rows of
+# Model.tables: physics.TABLE_*.
+VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = (
+    COST_TERMS.index(term) for term in ("volume", "power", "supply", "exclusion", "pressure")
+)
 ILLEGAL, REJECTED, ACCEPTED = -1, 0, 1  # outcomes of a proposal
-T_VOLUME, T_POWER, T_EXCLUSION, T_RESISTANCE, T_FLOW = range(5)
 
 
 @jit_norc_inline
@@ -128,6 +133,15 @@ def _add(costs, compensation, k, x):
     else:
         compensation[k] += (x - t) + s
     costs[k] = t
+
+
+@jit_norc_inline
+def weighted_total(model, vascular, exclusion, pressure, w_supply, supply):
+    """The annealed total (or a change of it) from its terms: the kernel's one copy of
+    :func:`vasc_pipeline.costs.total_cost`, C = (C_w + C_v) + w_o C_o + w_p C_p + w_s C_s,
+    with ``vascular`` = C_w + C_v and the supply weight passed in (it follows its own
+    schedule, :func:`supply_weight`). Same operations in the same order as the reference."""
+    return vascular + model.w_exclusion * exclusion + model.w_pressure * pressure + w_supply * supply
 
 
 @jit_norc
@@ -443,7 +457,7 @@ def pressure_cost(model, state):
         top -= 1
         x = stack[top]
         n = n_down[x]
-        pressure[x] = pressure[parent[x]] - tables[T_FLOW, n] * tables[T_RESISTANCE, n] * state.seg_length[x]
+        pressure[x] = pressure[parent[x]] - tables[TABLE_FLOW, n] * tables[TABLE_RESISTANCE, n] * state.seg_length[x]
         if x >= first_bif:
             stack[top] = children[x, 0]
             stack[top + 1] = children[x, 1]
@@ -569,12 +583,12 @@ def initialise(model, state):
         n = state.n_downstream[i]
         length = _distance3(pos[i], pos[p])
         state.seg_length[i] = length
-        _add(state.costs, state.compensation, VOLUME, tables[T_VOLUME, n] * length)
-        _add(state.costs, state.compensation, POWER, tables[T_POWER, n] * length)
+        _add(state.costs, state.compensation, VOLUME, tables[TABLE_VOLUME, n] * length)
+        _add(state.costs, state.compensation, POWER, tables[TABLE_POWER, n] * length)
         if model.exclusion_on:
             s = segment_exclusion(model, pos[i], pos[p])
             state.seg_exclusion[i] = s
-            _add(state.costs, state.compensation, EXCLUSION, tables[T_EXCLUSION, n] * s)
+            _add(state.costs, state.compensation, EXCLUSION, tables[TABLE_EXCLUSION, n] * s)
     if model.supply_on:
         c_s = 10.0 * np.count_nonzero(model.mask)
         for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
@@ -703,9 +717,9 @@ def _translate_node(model, state, i, new, temp):
     n = state.n_downstream[i]
     len_i = _distance3(new, pos[p])
     d_len = len_i - state.seg_length[i]
-    d_vol = tables[T_VOLUME, n] * d_len
-    d_pow = tables[T_POWER, n] * d_len
-    old_exc = tables[T_EXCLUSION, n] * state.seg_exclusion[i]
+    d_vol = tables[TABLE_VOLUME, n] * d_len
+    d_pow = tables[TABLE_POWER, n] * d_len
+    old_exc = tables[TABLE_EXCLUSION, n] * state.seg_exclusion[i]
     c0 = state.children[i, 0]
     c1 = state.children[i, 1]
     n0 = 0
@@ -719,20 +733,23 @@ def _translate_node(model, state, i, new, temp):
         n1 = state.n_downstream[c1]
         len_c0 = _distance3(pos[c0], new)
         len_c1 = _distance3(pos[c1], new)
-        d_vol += tables[T_VOLUME, n0] * (len_c0 - state.seg_length[c0]) + tables[T_VOLUME, n1] * (
+        d_vol += tables[TABLE_VOLUME, n0] * (len_c0 - state.seg_length[c0]) + tables[TABLE_VOLUME, n1] * (
             len_c1 - state.seg_length[c1]
         )
-        d_pow += tables[T_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[T_POWER, n1] * (
+        d_pow += tables[TABLE_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[TABLE_POWER, n1] * (
             len_c1 - state.seg_length[c1]
         )
-        old_exc += tables[T_EXCLUSION, n0] * state.seg_exclusion[c0] + tables[T_EXCLUSION, n1] * state.seg_exclusion[c1]
+        old_exc += (
+            tables[TABLE_EXCLUSION, n0] * state.seg_exclusion[c0]
+            + tables[TABLE_EXCLUSION, n1] * state.seg_exclusion[c1]
+        )
     d_sup = 0.0
     if is_terminal and model.supply_on:
         d_sup = supply_move_delta(model, state.supply, pos[i], new)
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
     u = -1.0
     if not model.pressure_on:
-        bound = (d_vol + d_pow) - model.w_exclusion * old_exc + w_sup * d_sup
+        bound = weighted_total(model, d_vol + d_pow, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
         rejected, u = _early_reject(bound, temp, rng)
         if rejected:
             return REJECTED
@@ -740,11 +757,11 @@ def _translate_node(model, state, i, new, temp):
     exc_i = 0.0
     if model.exclusion_on:
         exc_i = segment_exclusion(model, new, pos[p])
-        d_exc = tables[T_EXCLUSION, n] * exc_i
+        d_exc = tables[TABLE_EXCLUSION, n] * exc_i
         if not is_terminal:
             exc_c0 = segment_exclusion(model, pos[c0], new)
             exc_c1 = segment_exclusion(model, pos[c1], new)
-            d_exc += tables[T_EXCLUSION, n0] * exc_c0 + tables[T_EXCLUSION, n1] * exc_c1
+            d_exc += tables[TABLE_EXCLUSION, n0] * exc_c0 + tables[TABLE_EXCLUSION, n1] * exc_c1
         d_exc -= old_exc
     new_pressure = 0.0
     d_pre = 0.0
@@ -771,7 +788,7 @@ def _translate_node(model, state, i, new, temp):
         if not is_terminal:
             state.seg_length[c0] = old_len_c0
             state.seg_length[c1] = old_len_c1
-    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + w_sup * d_sup
+    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, w_sup, d_sup)
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_TERMINAL_ACCEPTED + 2 * cls] += 1
@@ -821,10 +838,10 @@ def _path_delta(model, state, start, stop, dn):
             n0 = state.n_downstream[x]
             n1 = n0 + dn
             length = state.seg_length[x]
-            d_vol += (tables[T_VOLUME, n1] - tables[T_VOLUME, n0]) * length
-            d_pow += (tables[T_POWER, n1] - tables[T_POWER, n0]) * length
+            d_vol += (tables[TABLE_VOLUME, n1] - tables[TABLE_VOLUME, n0]) * length
+            d_pow += (tables[TABLE_POWER, n1] - tables[TABLE_POWER, n0]) * length
             if model.exclusion_on:
-                d_exc += (tables[T_EXCLUSION, n1] - tables[T_EXCLUSION, n0]) * state.seg_exclusion[x]
+                d_exc += (tables[TABLE_EXCLUSION, n1] - tables[TABLE_EXCLUSION, n0]) * state.seg_exclusion[x]
         x = state.parent[x]
     return d_vol, d_pow, d_exc
 
@@ -939,16 +956,18 @@ def _swap_nodes(model, state, a, b, temp):
         d_exc += e
     new_len_a = _distance3(pos[a], pos[pb])
     new_len_b = _distance3(pos[b], pos[pa])
-    d_vol += tables[T_VOLUME, na] * (new_len_a - state.seg_length[a]) + tables[T_VOLUME, nb] * (
+    d_vol += tables[TABLE_VOLUME, na] * (new_len_a - state.seg_length[a]) + tables[TABLE_VOLUME, nb] * (
         new_len_b - state.seg_length[b]
     )
-    d_pow += tables[T_POWER, na] * (new_len_a - state.seg_length[a]) + tables[T_POWER, nb] * (
+    d_pow += tables[TABLE_POWER, na] * (new_len_a - state.seg_length[a]) + tables[TABLE_POWER, nb] * (
         new_len_b - state.seg_length[b]
     )
-    old_exc = tables[T_EXCLUSION, na] * state.seg_exclusion[a] + tables[T_EXCLUSION, nb] * state.seg_exclusion[b]
+    old_exc = (
+        tables[TABLE_EXCLUSION, na] * state.seg_exclusion[a] + tables[TABLE_EXCLUSION, nb] * state.seg_exclusion[b]
+    )
     u = -1.0
     if not model.pressure_on:  # skip the traversals when even a zero-exclusion bound fails
-        rejected, u = _early_reject((d_vol + d_pow) + model.w_exclusion * (d_exc - old_exc), temp, rng)
+        rejected, u = _early_reject(weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, 0.0, 0.0), temp, rng)
         if rejected:
             return REJECTED
     new_exc_a = 0.0
@@ -956,7 +975,7 @@ def _swap_nodes(model, state, a, b, temp):
     if model.exclusion_on:
         new_exc_a = segment_exclusion(model, pos[a], pos[pb])
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
-        d_exc += (tables[T_EXCLUSION, na] * new_exc_a + tables[T_EXCLUSION, nb] * new_exc_b) - old_exc
+        d_exc += (tables[TABLE_EXCLUSION, na] * new_exc_a + tables[TABLE_EXCLUSION, nb] * new_exc_b) - old_exc
     old_len_a = state.seg_length[a]
     old_len_b = state.seg_length[b]
     d_pre = 0.0
@@ -970,7 +989,7 @@ def _swap_nodes(model, state, a, b, temp):
         _exchange_parents(state, a, b, lca)
         state.seg_length[a] = old_len_a
         state.seg_length[b] = old_len_b
-    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre
+    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, 0.0, 0.0)  # a swap leaves C_s alone
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_SWAP_ACCEPTED] += 1
@@ -1015,10 +1034,13 @@ def scaled_total_without_supply(model, state):
     """
     c = state.costs
     e = state.compensation
-    return (
-        ((c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER]))
-        + model.w_exclusion * (c[EXCLUSION] + e[EXCLUSION])
-        + model.w_pressure * (c[PRESSURE] + e[PRESSURE])
+    return weighted_total(
+        model,
+        (c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER]),
+        c[EXCLUSION] + e[EXCLUSION],
+        c[PRESSURE] + e[PRESSURE],
+        0.0,
+        0.0,
     )
 
 
