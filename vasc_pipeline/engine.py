@@ -193,6 +193,7 @@ def build_problem(config: Any) -> Problem:
         acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
+        early_reject=True,
     )
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
