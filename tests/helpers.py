@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-from vasc_pipeline import config, engine
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from vasc_pipeline import config, costs, engine, kernel
+from vasc_pipeline.tree import check_tree
 
 
 def make_problem(*overrides: str):
@@ -10,13 +19,33 @@ def make_problem(*overrides: str):
     return engine.build_problem(config.compose(list(overrides)))
 
 
-# -- real processes: ``python -m vasc_pipeline`` as a user runs it -----------------------------
+# -- kernel states: running sums and move counters ------------------------------------------
 
-import os  # noqa: E402
-import socket  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
+
+def assert_running_equals_full(problem, state):
+    tree = engine.tree_of(problem, state)
+    check_tree(tree, problem.tissue)
+    running = engine.running_costs(problem, state)
+    full = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
+    assert running["supply"] == full["supply"]  # integer-valued: exact
+    for term in ("volume", "power", "exclusion", "pressure", "total"):
+        assert running[term] == pytest.approx(full[term], rel=1e-9, abs=1e-300), term
+    return running
+
+
+def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True):
+    c = state.counters
+    pairs = [
+        (kernel.COUNTER_BIFURCATION_PROPOSED, kernel.COUNTER_BIFURCATION_ACCEPTED),
+        (kernel.COUNTER_SWAP_PROPOSED, kernel.COUNTER_SWAP_ACCEPTED),
+    ]
+    if terminals_move:
+        pairs.append((kernel.COUNTER_TERMINAL_PROPOSED, kernel.COUNTER_TERMINAL_ACCEPTED))
+    for proposed, accepted in pairs:
+        assert 0 < c[accepted] < c[proposed]
+
+
+# -- real processes: ``python -m vasc_pipeline`` as a user runs it -----------------------------
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import make_problem
+from helpers import assert_running_equals_full, make_problem
 from scipy.optimize import minimize
-from test_kernel import assert_running_equals_full
 
 from vasc_pipeline import engine, finish, geometry, kernel
 from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals

@@ -2,37 +2,14 @@
 
 import numpy as np
 import pytest
-from helpers import make_problem
+from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasc_pipeline import costs, engine, kernel
-from vasc_pipeline.tree import check_tree, count_terminals
+from vasc_pipeline import engine, kernel
+from vasc_pipeline.tree import count_terminals
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
-
-
-def assert_running_equals_full(problem, state):
-    tree = engine.tree_of(problem, state)
-    check_tree(tree, problem.tissue)
-    running = engine.running_costs(problem, state)
-    full = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
-    assert running["supply"] == full["supply"]  # integer-valued: exact
-    for term in ("volume", "power", "exclusion", "pressure", "total"):
-        assert running[term] == pytest.approx(full[term], rel=1e-9, abs=1e-300), term
-    return running
-
-
-def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True):
-    c = state.counters
-    pairs = [
-        (kernel.COUNTER_BIFURCATION_PROPOSED, kernel.COUNTER_BIFURCATION_ACCEPTED),
-        (kernel.COUNTER_SWAP_PROPOSED, kernel.COUNTER_SWAP_ACCEPTED),
-    ]
-    if terminals_move:
-        pairs.append((kernel.COUNTER_TERMINAL_PROPOSED, kernel.COUNTER_TERMINAL_ACCEPTED))
-    for proposed, accepted in pairs:
-        assert 0 < c[accepted] < c[proposed]
 
 
 @pytest.mark.parametrize(
@@ -206,3 +183,26 @@ def test_supply_map_is_int16_and_int32_checkpoints_resume_bit_identically():
     for name in engine.CHECKPOINT_FIELDS:
         np.testing.assert_array_equal(getattr(state, name), getattr(old_style, name), err_msg=name)
     assert_running_equals_full(problem, state)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [("tissue=sphere", "n_terminals=60"), ("tissue=heart", "n_terminals=60")],
+    ids=["sphere", "heart"],
+)
+def test_early_rejection_changes_no_decision(overrides):
+    """The early-rejection shortcut skips work only: same states, bit for bit, without it."""
+    import dataclasses
+
+    steps = 200_000
+    problem = make_problem(*overrides, *COLD, f"anneal.steps={steps}")
+    assert problem.model.early_reject and problem.terms.exclusion and not problem.terms.pressure
+    final = {}
+    for early in (True, False):
+        p = dataclasses.replace(problem, model=problem.model._replace(early_reject=early))
+        state = engine.initial_state(p, seed=5)
+        engine.run_block(p, state, steps)
+        assert_moves_of_every_kind_accepted_and_rejected(state)
+        final[early] = engine.state_arrays(state)
+    for name, value in final[True].items():
+        np.testing.assert_array_equal(value, final[False][name], err_msg=name)

@@ -183,9 +183,22 @@ def test_a_killed_worker_resumes_its_job_from_the_checkpoint(tmp_path):
 
         thread = threading.Thread(target=sweep_thread)
         thread.start()
-        victim = wait_for(lambda: checkpointed_running_run(tmp_path), "a checkpoint")
-        key = f"vasc-run-{victim.name.removesuffix('.zarr')}-"
-        worker = next(addr for addr, keys in client.processing().items() if any(k.startswith(key) for k in keys))
+
+        def victim_on_a_worker():
+            """(run store, worker) of a checkpointed run still processing; None if there is none now.
+
+            Looked up together and polled: a run seen running may finish before its worker is
+            asked, and then another run (or the next poll) is taken.
+            """
+            victim = checkpointed_running_run(tmp_path)
+            if victim is None:
+                return None
+            key = f"vasc-run-{victim.name.removesuffix('.zarr')}-"
+            processing = client.processing().items()
+            worker = next((addr for addr, keys in processing if any(k.startswith(key) for k in keys)), None)
+            return None if worker is None else (victim, worker)
+
+        victim, worker = wait_for(victim_on_a_worker, "a checkpointed run on a worker")
         os.kill(client.run(os.getpid, workers=[worker])[worker], signal.SIGKILL)
         thread.join(TIMEOUT)
     assert "error" not in outcome, outcome.get("error")

@@ -382,3 +382,30 @@ def test_figures_leave_the_callers_matplotlib_state_alone(swept):
     out = subprocess.run([sys.executable, "-c", code, str(swept[0])], capture_output=True, text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["svg", "13.0", "None"]
+
+
+def test_a_summary_over_several_tissues_gets_a_tissue_dim(tmp_path):
+    """Runs of two tissues (one output_dir each, as a sweep writes them) reduced together."""
+    tiny = ["+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1]"]
+    tiny += ["anneal.steps=20000", "anneal.trace_every=10000", "cluster.dashboard_address=null"]
+    jobs = []
+    for name in ("sphere", "plane2d"):
+        jobs += run_all(tmp_path / name, *tiny, f"tissue={name}")
+    runs = reduce_mod.find_runs(tmp_path / "sphere")[0] + reduce_mod.find_runs(tmp_path / "plane2d")[0]
+    summary, best, dims = reduce_mod.build_summary(runs)
+    assert dims == ["tissue", "n_terminals", "m_b"]
+    assert summary.attrs["tissues"] == ["plane2d", "sphere"] and len(best) == 2
+    c = summary["costs"]
+    assert c["cost_total"].sizes == {"tissue": 2, "n_terminals": 1, "m_b": 1, "seed": 2}
+    for j in jobs:
+        stored = store.RunStore.open(j.store, mode="r").attrs["cost"]["total"]
+        point = {"tissue": j.coords["tissue"], "n_terminals": 16, "m_b": 641.3, "seed": j.coords["seed"]}
+        assert float(c["cost_total"].sel(point)) == stored
+    morph = summary["morphometry"]
+    for (name, n, m_b), r in best.items():
+        assert r.tissue == name
+        assert str(morph["best_run_id"].sel(tissue=name, n_terminals=n, m_b=m_b).values) == r.run_id
+    frame = reduce_mod.comparison_frame(summary)
+    assert set(frame["tissue"]) == {"plane2d", "sphere"}
+    with pytest.raises(reduce_mod.ReductionError, match="different configurations"):
+        reduce_mod.check_one_configuration(tmp_path, runs)  # one output_dir never mixes them

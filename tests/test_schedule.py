@@ -4,8 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import make_problem
-from test_kernel import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full
+from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
 
 from vasc_pipeline import config, engine, geometry, job, kernel, sweep
 from vasc_pipeline.config import ConfigError

@@ -56,10 +56,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._jit import jit, jit_inline
-from .costs import COST_TERMS, full_costs, total_cost
+from .costs import full_costs, total_cost
 from .kernel import _add
 from .physics import cost_tables
 from .rng import next_below, next_double, seed_state
+from .store import TRACE_FIELDS
 from .tree import Tree, random_terminal_sites
 
 __all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", "TRACE_NAMES"]
@@ -67,7 +68,7 @@ __all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", 
 # Trace fields of a CCO run (the anneal's names; "step" counts terminals in the tree,
 # "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance criterion
 # accepted for that terminal).
-TRACE_NAMES = ("step", "temperature", *COST_TERMS, "total", "acceptance")
+TRACE_NAMES = tuple(f[0] for f in TRACE_FIELDS)
 
 
 @dataclass

@@ -9,12 +9,13 @@ Amanatides-Woo, the supply map a brute-force distance test per terminal.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
 from .physics import Physics, cost_tables
 from .tissue import Tissue
+from .topology import segment_lengths as _segment_lengths
+from .topology import topological_order
 from .tree import Tree
 
 __all__ = [
@@ -59,10 +60,7 @@ def active_terms(physics: Physics, terminals_fixed: bool = False) -> ActiveTerms
 
 def segment_lengths(tree: Tree) -> np.ndarray:
     """Length [m] of the segment ending at every node (0 at inlets)."""
-    lengths = np.zeros(tree.n_nodes)
-    seg = tree.parent >= 0
-    lengths[seg] = np.linalg.norm(tree.position[seg] - tree.position[tree.parent[seg]], axis=1)
-    return lengths
+    return _segment_lengths(tree.parent, tree.position)
 
 
 def voxel_pieces(u0: np.ndarray, u1: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -173,14 +171,9 @@ def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = No
     n = tree.n_downstream
     drop = tables.flow[n] * tables.resistance[n] * lengths
     pressure = np.zeros(tree.n_nodes)
-    queue = deque(range(tree.n_inlets))
     pressure[: tree.n_inlets] = physics.pressure_inlet
-    while queue:
-        node = queue.popleft()
-        for child in tree.children[node]:
-            if child >= 0:
-                pressure[child] = pressure[node] - drop[child]
-                queue.append(child)
+    for node in topological_order(tree.parent)[tree.n_inlets :].tolist():  # parents first
+        pressure[node] = pressure[tree.parent[node]] - drop[node]
     return pressure
 
 

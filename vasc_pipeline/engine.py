@@ -16,15 +16,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
 from . import kernel, packing
 from .config import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config, validate
-from .costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, full_costs
+from .costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, full_costs, total_cost
 from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
+from .store import TRACE_FIELDS
 from .tissue import Tissue, TissueError, build_tissue
 from .tree import Tree, TreeError, load_terminal_sites, random_tree
 
@@ -35,6 +36,7 @@ __all__ = [
     "initial_state",
     "calibrate_schedule",
     "run_block",
+    "anneal_blocks",
     "finish",
     "running_costs",
     "tree_of",
@@ -47,6 +49,12 @@ __all__ = [
 
 # State fields saved in a checkpoint (everything but scratch space).
 CHECKPOINT_FIELDS = tuple(f for f in kernel.State._fields if not f.startswith("scratch_"))
+# Their dtypes (the one list; :func:`restore_state` casts to them): float64 but these, and
+# the supply map (:func:`supply_dtype`).
+_STATE_INT64 = dict.fromkeys(
+    ("parent", "children", "n_downstream", "counters", "cell_of", "cell_head", "cell_next", "cell_prev"), np.int64
+)
+_STATE_INT64["rng"] = np.uint64
 
 
 @dataclass
@@ -185,6 +193,7 @@ def build_problem(config: Any) -> Problem:
         acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
+        early_reject=True,
     )
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
@@ -214,27 +223,27 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
         tree = random_tree(problem.tissue, problem.physics.n_terminals, rng, problem.sites)
     anneal = problem.config.anneal
     m = tree.n_nodes
-    state = kernel.State(
-        parent=tree.parent,
-        children=tree.children,
-        position=tree.position,
-        n_downstream=tree.n_downstream,
-        seg_length=np.zeros(m),
-        seg_exclusion=np.zeros(m),
-        supply=np.zeros(problem.tissue.shape, dtype=supply_dtype(problem.physics.n_terminals)),
-        costs=np.zeros(len(COST_TERMS)),
-        compensation=np.zeros(len(COST_TERMS)),
-        rng=rng,
-        counters=np.zeros(kernel.N_COUNTERS, dtype=np.int64),
-        step_size=problem.model.step_max.copy(),
-        schedule=np.array([np.nan, np.nan]),
-        cell_of=np.zeros(m, dtype=np.int64),
-        cell_head=np.zeros(int(np.prod(problem.model.cell_shape)), dtype=np.int64),
-        cell_next=np.zeros(m, dtype=np.int64),
-        cell_prev=np.zeros(m, dtype=np.int64),
-        scratch_mark=np.zeros(m, dtype=np.int64),
-        scratch_stack=np.zeros(m, dtype=np.int64),
-        scratch_pressure=np.zeros(m),
+    state = restore_state(
+        problem,
+        {
+            "parent": tree.parent,
+            "children": tree.children,
+            "position": tree.position,
+            "n_downstream": tree.n_downstream,
+            "seg_length": np.zeros(m),
+            "seg_exclusion": np.zeros(m),
+            "supply": np.zeros(problem.tissue.shape),
+            "costs": np.zeros(len(COST_TERMS)),
+            "compensation": np.zeros(len(COST_TERMS)),
+            "rng": rng,
+            "counters": np.zeros(kernel.N_COUNTERS),
+            "step_size": problem.model.step_max,
+            "schedule": np.array([np.nan, np.nan]),
+            "cell_of": np.zeros(m),
+            "cell_head": np.zeros(int(np.prod(problem.model.cell_shape))),
+            "cell_next": np.zeros(m),
+            "cell_prev": np.zeros(m),
+        },
     )
     kernel.initialise(problem.model, state)
     state.schedule[:] = (
@@ -291,8 +300,7 @@ def running_costs(problem: Problem, state: kernel.State) -> dict[str, float]:
     """The kernel's running sums (compensated), unscaled, plus the annealed total."""
     values = state.costs + state.compensation
     out = {name: float(values[i]) for i, name in enumerate(COST_TERMS)}
-    w_o, w_p, w_s = problem.physics.weights
-    out["total"] = (out["volume"] + out["power"]) + w_o * out["exclusion"] + w_p * out["pressure"] + w_s * out["supply"]
+    out["total"] = total_cost(out, problem.physics)
     return out
 
 
@@ -328,22 +336,9 @@ def state_arrays(state: kernel.State) -> dict[str, np.ndarray]:
 def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.State:
     """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed."""
     m = 2 * problem.physics.n_terminals
-    dtypes = {
-        "parent": np.int64,
-        "children": np.int64,
-        "n_downstream": np.int64,
-        "supply": supply_dtype(problem.physics.n_terminals),
-        "rng": np.uint64,
-        "counters": np.int64,
-        "cell_of": np.int64,
-        "cell_head": np.int64,
-        "cell_next": np.int64,
-        "cell_prev": np.int64,
-    }
-    fields = {
-        name: np.ascontiguousarray(arrays[name], dtype=dtypes.get(name, np.float64)).copy()
-        for name in CHECKPOINT_FIELDS
-    }
+    dtypes = {name: _STATE_INT64.get(name, np.float64) for name in CHECKPOINT_FIELDS}
+    dtypes["supply"] = supply_dtype(problem.physics.n_terminals)
+    fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes[name]).copy() for name in CHECKPOINT_FIELDS}
     return kernel.State(
         **fields,
         scratch_mark=np.zeros(m, dtype=np.int64),
@@ -355,7 +350,7 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.Sta
 class Trace:
     """Cost trace records, one per block: step, temperature, cost terms, acceptance."""
 
-    names = ("step", "temperature", *COST_TERMS, "total", "acceptance")
+    names = tuple(f[0] for f in TRACE_FIELDS)
 
     def __init__(self) -> None:
         self.rows: list[tuple] = []
@@ -380,6 +375,22 @@ def accepted_moves(state: kernel.State) -> int:
     return int(
         c[kernel.COUNTER_TERMINAL_ACCEPTED] + c[kernel.COUNTER_BIFURCATION_ACCEPTED] + c[kernel.COUNTER_SWAP_ACCEPTED]
     )
+
+
+def anneal_blocks(problem: Problem, state: kernel.State, trace: Trace, block: int) -> Iterator[int]:
+    """Anneal ``state`` to the end of the schedule in blocks, recording one trace row per block.
+
+    Blocks end on multiples of ``block`` (a resumed state starts on one), so a resumed run
+    has exactly the trace of an uninterrupted one. Yields the step count after every block
+    (the caller reports progress or checkpoints there).
+    """
+    total = problem.total_steps
+    while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
+        n = min(block - step % block, total - step)
+        before = accepted_moves(state)
+        run_block(problem, state, n)
+        trace.record(problem, state, n, accepted_moves(state) - before)
+        yield step + n
 
 
 def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
@@ -438,14 +449,9 @@ def run(
     block = int(block_steps or problem.config.anneal.trace_every)
     trace = Trace()
     trace.record(problem, state, 0, 0)
-    total = problem.total_steps
-    while state.counters[kernel.COUNTER_STEP] < total:
-        n = min(block, total - int(state.counters[kernel.COUNTER_STEP]))
-        before = accepted_moves(state)
-        run_block(problem, state, n)
-        trace.record(problem, state, n, accepted_moves(state) - before)
+    for step in anneal_blocks(problem, state, trace, block):
         if progress is not None:
-            progress(int(state.counters[kernel.COUNTER_STEP]), total, running_costs(problem, state))
+            progress(step, problem.total_steps, running_costs(problem, state))
     report = finish(problem, state)
     tree = tree_of(problem, state)
     return RunResult(

@@ -35,20 +35,9 @@ import numpy as np
 import pandas as pd
 
 from . import morphometry as _m
+from .topology import KIND_TERMINAL, check_tree_arrays, segment_lengths, terminals_downstream
 
 __all__ = ["terminals_downstream", "tree_table", "write_vtp", "write_csv", "export_tree", "export_run"]
-
-
-def terminals_downstream(parent, kind) -> np.ndarray:
-    """int64 (node,) number of terminals downstream of every node (1 at terminals; an inlet counts its tree)."""
-    parent = np.asarray(parent, dtype=np.int64)
-    count = (np.asarray(kind) == _m.KIND_TERMINAL).astype(np.int64)
-    # Deepest nodes first: each node adds its (finished) count to its parent's.
-    for v in reversed(_m.topological_order(parent).tolist()):
-        p = parent[v]
-        if p >= 0:
-            count[p] += count[v]
-    return count
 
 
 def tree_table(
@@ -78,7 +67,7 @@ def tree_table(
     position = np.asarray(position, dtype=float)
     radius = np.asarray(radius, dtype=float)
     kind = np.asarray(kind, dtype=np.int64)
-    _m.check_tree_arrays(parent, kind, radius=radius, position=position)
+    check_tree_arrays(parent, kind, radius=radius, position=position)
     if orders is None or strahler is None:
         ds = _m.morphometry(parent, position, radius, kind)
         if orders is None:
@@ -96,11 +85,11 @@ def tree_table(
             "y_m": position[:, 1],
             "z_m": position[:, 2],
             "radius_m": np.where(seg, radius, np.nan),
-            "length_m": np.where(seg, _m.segment_lengths(parent, position), np.nan),
+            "length_m": np.where(seg, segment_lengths(parent, position), np.nan),
         }
     )
     if total_flow is not None:
-        n_terminals = int((kind == _m.KIND_TERMINAL).sum())
+        n_terminals = int((kind == KIND_TERMINAL).sum())
         table["flow_m3_s"] = np.where(seg, n_down * float(total_flow) / n_terminals, np.nan)
     for column, values in (("order", orders), ("strahler_order", strahler), ("terminals_downstream", n_down)):
         table[column] = pd.Series(np.asarray(values, dtype=np.int64), dtype="Int64").where(seg)

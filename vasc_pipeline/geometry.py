@@ -36,6 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .physics import Physics, cost_tables
+from .topology import node_depth, segment_lengths
 from .tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 __all__ = [
@@ -84,7 +85,7 @@ def vascular_weights(tree: Tree, physics: Physics) -> np.ndarray:
 def vascular_cost(position: np.ndarray, parent: np.ndarray, weights: np.ndarray) -> float:
     """sum_i w_i |x_i - x_parent(i)| over segments [W]."""
     seg = parent >= 0
-    return float(np.sum(weights[seg] * np.linalg.norm(position[seg] - position[parent[seg]], axis=1)))
+    return float(np.sum(weights[seg] * segment_lengths(parent, position)[seg]))
 
 
 # --------------------------------------------------------------------------------------
@@ -92,7 +93,12 @@ def vascular_cost(position: np.ndarray, parent: np.ndarray, weights: np.ndarray)
 
 
 def _levels(children: np.ndarray, roots: np.ndarray) -> list[np.ndarray]:
-    """Nodes by depth below the roots (level 0 = roots)."""
+    """Nodes by depth below the roots (level 0 = roots), each level in breadth-first order.
+
+    Not :func:`vasc_pipeline.topology.node_depth` grouped by depth: the order within a level
+    fixes the order of the ``np.add.at`` sums in :func:`_side_forces`, so results stay
+    bit-identical with the trees this solver has always produced.
+    """
     levels = []
     frontier = roots
     while frontier.size:
@@ -206,7 +212,7 @@ def _solve_spd(hess, rhs, scale):
 # Stages
 
 
-def _weiszfeld(x, parent, w, free, levels, depth, scale, iterations):
+def _weiszfeld(x, parent, w, free, depth, scale, iterations):
     """Smith's global Weiszfeld iteration: solve sum_j w_ij / L_ij (x_i - x_j) = 0 for all free i."""
     m = parent.size
     var = np.full(m, -1, dtype=np.int64)
@@ -362,9 +368,7 @@ def optimal_bifurcations(
     free = ~fixed
     children = tree.children
     levels = _levels(children, np.flatnonzero(parent < 0))
-    depth = np.zeros(m, dtype=np.int64)
-    for d, lev in enumerate(levels):
-        depth[lev] = d
+    depth = node_depth(parent)
     # Work in the affine hull of the fixed nodes: the optimum lies in their convex hull,
     # and dropping the flat directions (a 2-D tissue's z) keeps the Newton systems regular.
     p_fixed = tree.position[fixed]
@@ -378,10 +382,9 @@ def optimal_bifurcations(
     converged = True
     collapsed = np.zeros(m, dtype=bool)
     if dim > 0 and np.any(free):
-        x, iterations = _weiszfeld(x, parent, w, free, levels, depth, scale, 30)
+        x, iterations = _weiszfeld(x, parent, w, free, depth, scale, 30)
         seg = parent >= 0
-        length = np.zeros(m)
-        length[seg] = np.linalg.norm(x[seg] - x[parent[seg]], axis=1)
+        length = segment_lengths(parent, x)
         collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
         converged = False
         for _ in range(max_rounds):
@@ -424,7 +427,7 @@ def optimal_bifurcations(
         position[free] = np.clip(position[free], lo, hi)
     seg = parent >= 0
     final = np.zeros(m, dtype=bool)
-    final[seg] = np.linalg.norm(position[seg] - position[parent[seg]], axis=1) <= collapse_tol * scale
+    final[seg] = segment_lengths(parent, position)[seg] <= collapse_tol * scale
     return BifurcationOptimum(position, vascular_cost(position, parent, w), final, converged, iterations)
 
 

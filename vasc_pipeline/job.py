@@ -153,28 +153,22 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
         def wall() -> float:
             return wall_before + (time.perf_counter() - started)
 
-        while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
-            # Blocks end on multiples of trace_every (resumes start on one), so the trace of a
-            # resumed run is the trace of an uninterrupted one.
-            n = min(block - step % block, total - step)
-            before = engine.accepted_moves(state)
-            engine.run_block(problem, state, n)
-            trace.record(problem, state, n, engine.accepted_moves(state) - before)
+        for step in engine.anneal_blocks(problem, state, trace, block):
             if report is not None:
                 report(
                     {
                         "run_id": job.run_id,
                         "cell": job.cell,
-                        "step": step + n,
+                        "step": step,
                         "total_steps": total,
                         "cost": float(trace.rows[-1][-2]),
                     }
                 )
-            if time.perf_counter() - last_checkpoint >= every and step + n < total:
+            if time.perf_counter() - last_checkpoint >= every and step < total:
                 trace_length = store.append_trace(trace.arrays(), trace_length)
-                trace = engine.Trace()
+                trace.rows.clear()  # the same Trace: anneal_blocks records into it
                 store.write_checkpoint(
-                    engine.state_arrays(state), step=step + n, trace_length=trace_length, wall_seconds=wall()
+                    engine.state_arrays(state), step=step, trace_length=trace_length, wall_seconds=wall()
                 )
                 last_checkpoint = time.perf_counter()
 

@@ -13,7 +13,7 @@ the generator state, counters and step sizes. Everything a resumed run needs is 
 temperature and every random draw depend only on the step number and the saved state, so
 S steps in one block or any split of blocks give bit-identical trees.
 
-Cost term order in ``costs``: volume, power, supply, exclusion, pressure (unscaled).
+Cost term order in ``costs``: :data:`vasc_pipeline.costs.COST_TERMS` (unscaled).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from collections import namedtuple
 import numpy as np
 
 from ._jit import jit, jit_norc, jit_norc_inline
+from .costs import COST_TERMS
+from .physics import TABLE_EXCLUSION, TABLE_FLOW, TABLE_POWER, TABLE_RESISTANCE, TABLE_VOLUME
 from .rng import next_below, next_double
 
 Model = namedtuple(
@@ -67,6 +69,8 @@ Model = namedtuple(
         "acceptance_target",
         "adapt_window",
         "step_max",  # step_max float64 (2,) m: the configured half-widths
+        "early_reject",  # skip the exclusion traversals when a lower bound of ΔC fails Metropolis
+        # (same decisions and random stream either way; False only to test that)
     ],
 )
 
@@ -112,10 +116,28 @@ State = namedtuple(
     COUNTER_WINDOW_BIFURCATION_ACCEPTED,
 ) = range(12)
 N_COUNTERS = 12
+# Per translation class (row 0 terminals, 1 bifurcations) the counters of its proposals
+# (column N_PROPOSED) and acceptances (N_ACCEPTED): all moves, and the current adaptation window.
+N_PROPOSED, N_ACCEPTED = 0, 1
+MOVE_COUNTERS = np.array(
+    [
+        [COUNTER_TERMINAL_PROPOSED, COUNTER_TERMINAL_ACCEPTED],
+        [COUNTER_BIFURCATION_PROPOSED, COUNTER_BIFURCATION_ACCEPTED],
+    ]
+)
+WINDOW_COUNTERS = np.array(
+    [
+        [COUNTER_WINDOW_TERMINAL_PROPOSED, COUNTER_WINDOW_TERMINAL_ACCEPTED],
+        [COUNTER_WINDOW_BIFURCATION_PROPOSED, COUNTER_WINDOW_BIFURCATION_ACCEPTED],
+    ]
+)
 
-VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = range(5)
+# Indices into State.costs: the order of costs.COST_TERMS (their one home); rows of
+# Model.tables: physics.TABLE_*.
+VOLUME, POWER, SUPPLY, EXCLUSION, PRESSURE = (
+    COST_TERMS.index(term) for term in ("volume", "power", "supply", "exclusion", "pressure")
+)
 ILLEGAL, REJECTED, ACCEPTED = -1, 0, 1  # outcomes of a proposal
-T_VOLUME, T_POWER, T_EXCLUSION, T_RESISTANCE, T_FLOW = range(5)
 
 
 @jit_norc_inline
@@ -128,6 +150,15 @@ def _add(costs, compensation, k, x):
     else:
         compensation[k] += (x - t) + s
     costs[k] = t
+
+
+@jit_norc_inline
+def weighted_total(model, vascular, exclusion, pressure, w_supply, supply):
+    """The annealed total (or a change of it) from its terms: the kernel's one copy of
+    :func:`vasc_pipeline.costs.total_cost`, C = (C_w + C_v) + w_o C_o + w_p C_p + w_s C_s,
+    with ``vascular`` = C_w + C_v and the supply weight passed in (it follows its own
+    schedule, :func:`supply_weight`). Same operations in the same order as the reference."""
+    return vascular + model.w_exclusion * exclusion + model.w_pressure * pressure + w_supply * supply
 
 
 @jit_norc
@@ -443,7 +474,7 @@ def pressure_cost(model, state):
         top -= 1
         x = stack[top]
         n = n_down[x]
-        pressure[x] = pressure[parent[x]] - tables[T_FLOW, n] * tables[T_RESISTANCE, n] * state.seg_length[x]
+        pressure[x] = pressure[parent[x]] - tables[TABLE_FLOW, n] * tables[TABLE_RESISTANCE, n] * state.seg_length[x]
         if x >= first_bif:
             stack[top] = children[x, 0]
             stack[top + 1] = children[x, 1]
@@ -569,12 +600,12 @@ def initialise(model, state):
         n = state.n_downstream[i]
         length = _distance3(pos[i], pos[p])
         state.seg_length[i] = length
-        _add(state.costs, state.compensation, VOLUME, tables[T_VOLUME, n] * length)
-        _add(state.costs, state.compensation, POWER, tables[T_POWER, n] * length)
+        _add(state.costs, state.compensation, VOLUME, tables[TABLE_VOLUME, n] * length)
+        _add(state.costs, state.compensation, POWER, tables[TABLE_POWER, n] * length)
         if model.exclusion_on:
             s = segment_exclusion(model, pos[i], pos[p])
             state.seg_exclusion[i] = s
-            _add(state.costs, state.compensation, EXCLUSION, tables[T_EXCLUSION, n] * s)
+            _add(state.costs, state.compensation, EXCLUSION, tables[TABLE_EXCLUSION, n] * s)
     if model.supply_on:
         c_s = 10.0 * np.count_nonzero(model.mask)
         for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
@@ -658,16 +689,18 @@ def _adapt_step(model, state, cls, accepted):
     Counts live in the state's counters: block splits and resumes do not change it.
     """
     c = state.counters
-    c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls] += 1
+    i_proposed = WINDOW_COUNTERS[cls, N_PROPOSED]
+    i_accepted = WINDOW_COUNTERS[cls, N_ACCEPTED]
+    c[i_proposed] += 1
     if accepted:
-        c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] += 1
-    n = c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls]
+        c[i_accepted] += 1
+    n = c[i_proposed]
     if n >= model.adapt_window:
-        rate = c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] / n
+        rate = c[i_accepted] / n
         width = state.step_size[cls] * math.exp(2.0 * (rate - model.acceptance_target))
         state.step_size[cls] = min(max(width, 1e-9 * model.step_max[cls]), model.step_max[cls])
-        c[COUNTER_WINDOW_TERMINAL_PROPOSED + 2 * cls] = 0
-        c[COUNTER_WINDOW_TERMINAL_ACCEPTED + 2 * cls] = 0
+        c[i_proposed] = 0
+        c[i_accepted] = 0
 
 
 @jit_norc
@@ -680,101 +713,138 @@ def translate_node(model, state, i, new, temp):
 
 
 @jit_norc_inline
+def _segment_change(model, state, x, length):
+    """(ΔC_v, ΔC_w) when segment x gets ``length`` [m] at its current n (costs.full_costs:
+    volume[n] * L, power[n] * L)."""
+    n = state.n_downstream[x]
+    d_len = length - state.seg_length[x]
+    return model.tables[TABLE_VOLUME, n] * d_len, model.tables[TABLE_POWER, n] * d_len
+
+
+@jit_norc_inline
+def _exclusion_cost(model, n, traversal):
+    """C_o of one segment with n terminals downstream and traversal sum ``traversal``
+    (costs.full_costs: exclusion[n] * exclusion_sum)."""
+    return model.tables[TABLE_EXCLUSION, n] * traversal
+
+
+@jit_norc_inline
+def _segment_exclusion_cost(model, state, x):
+    """The current C_o of segment x (from its cached traversal sum)."""
+    return _exclusion_cost(model, state.n_downstream[x], state.seg_exclusion[x])
+
+
+@jit_norc_inline
+def _set_segment(state, x, length, exclusion):
+    state.seg_length[x] = length
+    state.seg_exclusion[x] = exclusion
+
+
+@jit_norc_inline
+def _legal_position(model, is_terminal, p):
+    """A terminal must lie in tissue, a bifurcation inside the grid's box."""
+    if is_terminal:
+        return in_tissue(model, p)
+    for a in range(3):
+        if p[a] < model.box_lo[a] or p[a] > model.box_hi[a]:
+            return False
+    return True
+
+
+@jit_norc_inline
+def _pressure_with_lengths(model, state, a, len_a, b, len_b, c, len_c):
+    """C_p (costs.node_pressures) with segments a, b, c (-1: none) tentatively at the given
+    lengths; the lengths are restored. C_p reads no position, so none is moved."""
+    old_a = state.seg_length[a]
+    state.seg_length[a] = len_a
+    old_b = 0.0
+    if b >= 0:
+        old_b = state.seg_length[b]
+        state.seg_length[b] = len_b
+    old_c = 0.0
+    if c >= 0:
+        old_c = state.seg_length[c]
+        state.seg_length[c] = len_c
+    pressure = pressure_cost(model, state)
+    state.seg_length[a] = old_a
+    if b >= 0:
+        state.seg_length[b] = old_b
+    if c >= 0:
+        state.seg_length[c] = old_c
+    return pressure
+
+
+@jit_norc_inline
 def _translate_node(model, state, i, new, temp):
-    """:func:`translate_node`, inlined into the move loop (:func:`_anneal_steps`)."""
-    tables = model.tables
+    """:func:`translate_node`, inlined into the move loop (:func:`_anneal_steps`).
+
+    The moved node's own segment (to its parent p) and, for a bifurcation, its children's
+    segments (c0, c1) change length; n does not change. Cheap terms first: unless
+    ``model.early_reject`` is off, the exclusion traversals are skipped when a lower bound
+    of ΔC (new segments' exclusion taken as 0) already fails Metropolis.
+    """
     rng = state.rng
     pos = state.position
-    first_bif = model.n_inlets + model.n_terminals
-    is_terminal = i < first_bif
+    is_terminal = i < model.n_inlets + model.n_terminals
     cls = 0 if is_terminal else 1
-    state.counters[COUNTER_TERMINAL_PROPOSED + 2 * cls] += 1
-    if is_terminal:
-        if not in_tissue(model, new):
-            return ILLEGAL
-    else:
-        for a in range(3):
-            if new[a] < model.box_lo[a] or new[a] > model.box_hi[a]:
-                return ILLEGAL
-    # The moved node's own segment and (for a bifurcation) its children's change length.
-    # Cheap terms first: the exclusion traversals are skipped when a lower bound of ΔC
-    # (new segments' exclusion taken as 0) already fails Metropolis.
+    state.counters[MOVE_COUNTERS[cls, N_PROPOSED]] += 1
+    if not _legal_position(model, is_terminal, new):
+        return ILLEGAL
     p = state.parent[i]
-    n = state.n_downstream[i]
-    len_i = _distance3(new, pos[p])
-    d_len = len_i - state.seg_length[i]
-    d_vol = tables[T_VOLUME, n] * d_len
-    d_pow = tables[T_POWER, n] * d_len
-    old_exc = tables[T_EXCLUSION, n] * state.seg_exclusion[i]
-    c0 = state.children[i, 0]
+    c0 = state.children[i, 0]  # -1, -1 for a terminal
     c1 = state.children[i, 1]
-    n0 = 0
-    n1 = 0
+    # volume and power
+    len_i = _distance3(new, pos[p])
+    d_vol, d_pow = _segment_change(model, state, i, len_i)
+    old_exc = _segment_exclusion_cost(model, state, i)
     len_c0 = 0.0
     len_c1 = 0.0
-    exc_c0 = 0.0
-    exc_c1 = 0.0
     if not is_terminal:
-        n0 = state.n_downstream[c0]
-        n1 = state.n_downstream[c1]
         len_c0 = _distance3(pos[c0], new)
         len_c1 = _distance3(pos[c1], new)
-        d_vol += tables[T_VOLUME, n0] * (len_c0 - state.seg_length[c0]) + tables[T_VOLUME, n1] * (
-            len_c1 - state.seg_length[c1]
-        )
-        d_pow += tables[T_POWER, n0] * (len_c0 - state.seg_length[c0]) + tables[T_POWER, n1] * (
-            len_c1 - state.seg_length[c1]
-        )
-        old_exc += tables[T_EXCLUSION, n0] * state.seg_exclusion[c0] + tables[T_EXCLUSION, n1] * state.seg_exclusion[c1]
+        v0, w0 = _segment_change(model, state, c0, len_c0)
+        v1, w1 = _segment_change(model, state, c1, len_c1)
+        d_vol += v0 + v1
+        d_pow += w0 + w1
+        old_exc += _segment_exclusion_cost(model, state, c0) + _segment_exclusion_cost(model, state, c1)
+    # supply (terminals only)
     d_sup = 0.0
     if is_terminal and model.supply_on:
         d_sup = supply_move_delta(model, state.supply, pos[i], new)
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
+    # early rejection on a lower bound
     u = -1.0
-    if not model.pressure_on:
-        bound = (d_vol + d_pow) - model.w_exclusion * old_exc + w_sup * d_sup
+    if model.early_reject and not model.pressure_on:
+        bound = weighted_total(model, d_vol + d_pow, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
         rejected, u = _early_reject(bound, temp, rng)
         if rejected:
             return REJECTED
+    # exclusion
     d_exc = 0.0
     exc_i = 0.0
+    exc_c0 = 0.0
+    exc_c1 = 0.0
     if model.exclusion_on:
         exc_i = segment_exclusion(model, new, pos[p])
-        d_exc = tables[T_EXCLUSION, n] * exc_i
+        d_exc = _exclusion_cost(model, state.n_downstream[i], exc_i)
         if not is_terminal:
             exc_c0 = segment_exclusion(model, pos[c0], new)
             exc_c1 = segment_exclusion(model, pos[c1], new)
-            d_exc += tables[T_EXCLUSION, n0] * exc_c0 + tables[T_EXCLUSION, n1] * exc_c1
+            d_exc += _exclusion_cost(model, state.n_downstream[c0], exc_c0) + _exclusion_cost(
+                model, state.n_downstream[c1], exc_c1
+            )
         d_exc -= old_exc
+    # pressure (recomputed in full on the tentative lengths)
     new_pressure = 0.0
     d_pre = 0.0
-    if model.pressure_on:  # tentatively apply: C_p is recomputed in full
-        o0 = pos[i, 0]
-        o1 = pos[i, 1]
-        o2 = pos[i, 2]
-        old_len_i = state.seg_length[i]
-        pos[i, 0] = new[0]
-        pos[i, 1] = new[1]
-        pos[i, 2] = new[2]
-        state.seg_length[i] = len_i
-        if not is_terminal:
-            old_len_c0 = state.seg_length[c0]
-            old_len_c1 = state.seg_length[c1]
-            state.seg_length[c0] = len_c0
-            state.seg_length[c1] = len_c1
-        new_pressure = pressure_cost(model, state)
+    if model.pressure_on:
+        new_pressure = _pressure_with_lengths(model, state, i, len_i, c0, len_c0, c1, len_c1)
         d_pre = new_pressure - state.costs[PRESSURE]
-        pos[i, 0] = o0
-        pos[i, 1] = o1
-        pos[i, 2] = o2
-        state.seg_length[i] = old_len_i
-        if not is_terminal:
-            state.seg_length[c0] = old_len_c0
-            state.seg_length[c1] = old_len_c1
-    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre + w_sup * d_sup
+    # Metropolis, then commit
+    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, w_sup, d_sup)
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
-    state.counters[COUNTER_TERMINAL_ACCEPTED + 2 * cls] += 1
+    state.counters[MOVE_COUNTERS[cls, N_ACCEPTED]] += 1
     if is_terminal and model.supply_on:
         supply_move(model, state.supply, pos[i], new)
     if model.p_local > 0.0:
@@ -782,13 +852,10 @@ def _translate_node(model, state, i, new, temp):
     pos[i, 0] = new[0]
     pos[i, 1] = new[1]
     pos[i, 2] = new[2]
-    state.seg_length[i] = len_i
-    state.seg_exclusion[i] = exc_i
+    _set_segment(state, i, len_i, exc_i)
     if not is_terminal:
-        state.seg_length[c0] = len_c0
-        state.seg_length[c1] = len_c1
-        state.seg_exclusion[c0] = exc_c0
-        state.seg_exclusion[c1] = exc_c1
+        _set_segment(state, c0, len_c0, exc_c0)
+        _set_segment(state, c1, len_c1, exc_c1)
     _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure)
     return ACCEPTED
 
@@ -821,10 +888,10 @@ def _path_delta(model, state, start, stop, dn):
             n0 = state.n_downstream[x]
             n1 = n0 + dn
             length = state.seg_length[x]
-            d_vol += (tables[T_VOLUME, n1] - tables[T_VOLUME, n0]) * length
-            d_pow += (tables[T_POWER, n1] - tables[T_POWER, n0]) * length
+            d_vol += (tables[TABLE_VOLUME, n1] - tables[TABLE_VOLUME, n0]) * length
+            d_pow += (tables[TABLE_POWER, n1] - tables[TABLE_POWER, n0]) * length
             if model.exclusion_on:
-                d_exc += (tables[T_EXCLUSION, n1] - tables[T_EXCLUSION, n0]) * state.seg_exclusion[x]
+                d_exc += (tables[TABLE_EXCLUSION, n1] - tables[TABLE_EXCLUSION, n0]) * state.seg_exclusion[x]
         x = state.parent[x]
     return d_vol, d_pow, d_exc
 
@@ -895,7 +962,6 @@ def swap_nodes(model, state, a, b, temp):
 @jit_norc_inline
 def _swap_nodes(model, state, a, b, temp):
     """:func:`swap_nodes`, inlined into the move loop (:func:`_anneal_steps`)."""
-    tables = model.tables
     rng = state.rng
     pos = state.position
     parent = state.parent
@@ -923,6 +989,8 @@ def _swap_nodes(model, state, a, b, temp):
             lca = x
             break
         x = parent[x]
+    # volume and power: n changes on the paths from the old parents up to the LCA, and the
+    # two moved segments change length (their own n does not change)
     na = state.n_downstream[a]
     nb = state.n_downstream[b]
     d_vol = 0.0
@@ -939,46 +1007,40 @@ def _swap_nodes(model, state, a, b, temp):
         d_exc += e
     new_len_a = _distance3(pos[a], pos[pb])
     new_len_b = _distance3(pos[b], pos[pa])
-    d_vol += tables[T_VOLUME, na] * (new_len_a - state.seg_length[a]) + tables[T_VOLUME, nb] * (
-        new_len_b - state.seg_length[b]
-    )
-    d_pow += tables[T_POWER, na] * (new_len_a - state.seg_length[a]) + tables[T_POWER, nb] * (
-        new_len_b - state.seg_length[b]
-    )
-    old_exc = tables[T_EXCLUSION, na] * state.seg_exclusion[a] + tables[T_EXCLUSION, nb] * state.seg_exclusion[b]
+    va, wa = _segment_change(model, state, a, new_len_a)
+    vb, wb = _segment_change(model, state, b, new_len_b)
+    d_vol += va + vb
+    d_pow += wa + wb
+    old_exc = _segment_exclusion_cost(model, state, a) + _segment_exclusion_cost(model, state, b)
+    # early rejection on a lower bound (new segments' exclusion taken as 0)
     u = -1.0
-    if not model.pressure_on:  # skip the traversals when even a zero-exclusion bound fails
-        rejected, u = _early_reject((d_vol + d_pow) + model.w_exclusion * (d_exc - old_exc), temp, rng)
+    if model.early_reject and not model.pressure_on:
+        rejected, u = _early_reject(weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, 0.0, 0.0), temp, rng)
         if rejected:
             return REJECTED
+    # exclusion
     new_exc_a = 0.0
     new_exc_b = 0.0
     if model.exclusion_on:
         new_exc_a = segment_exclusion(model, pos[a], pos[pb])
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
-        d_exc += (tables[T_EXCLUSION, na] * new_exc_a + tables[T_EXCLUSION, nb] * new_exc_b) - old_exc
-    old_len_a = state.seg_length[a]
-    old_len_b = state.seg_length[b]
+        d_exc += (_exclusion_cost(model, na, new_exc_a) + _exclusion_cost(model, nb, new_exc_b)) - old_exc
+    # pressure (recomputed in full on the tentatively swapped tree)
     d_pre = 0.0
     new_pressure = 0.0
-    if model.pressure_on:  # tentatively apply: C_p is recomputed in full
+    if model.pressure_on:
         _exchange_parents(state, a, b, lca)
-        state.seg_length[a] = new_len_a
-        state.seg_length[b] = new_len_b
-        new_pressure = pressure_cost(model, state)
+        new_pressure = _pressure_with_lengths(model, state, a, new_len_a, b, new_len_b, -1, 0.0)
+        _exchange_parents(state, a, b, lca)
         d_pre = new_pressure - state.costs[PRESSURE]
-        _exchange_parents(state, a, b, lca)
-        state.seg_length[a] = old_len_a
-        state.seg_length[b] = old_len_b
-    d_cost = (d_vol + d_pow) + model.w_exclusion * d_exc + model.w_pressure * d_pre
+    # Metropolis, then commit
+    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, 0.0, 0.0)  # a swap leaves C_s alone
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_SWAP_ACCEPTED] += 1
     _exchange_parents(state, a, b, lca)
-    state.seg_length[a] = new_len_a
-    state.seg_length[b] = new_len_b
-    state.seg_exclusion[a] = new_exc_a
-    state.seg_exclusion[b] = new_exc_b
+    _set_segment(state, a, new_len_a, new_exc_a)
+    _set_segment(state, b, new_len_b, new_exc_b)
     _commit(model, state, d_vol, d_pow, d_exc, 0.0, new_pressure)
     return ACCEPTED
 
@@ -1015,10 +1077,13 @@ def scaled_total_without_supply(model, state):
     """
     c = state.costs
     e = state.compensation
-    return (
-        ((c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER]))
-        + model.w_exclusion * (c[EXCLUSION] + e[EXCLUSION])
-        + model.w_pressure * (c[PRESSURE] + e[PRESSURE])
+    return weighted_total(
+        model,
+        (c[VOLUME] + e[VOLUME]) + (c[POWER] + e[POWER]),
+        c[EXCLUSION] + e[EXCLUSION],
+        c[PRESSURE] + e[PRESSURE],
+        0.0,
+        0.0,
     )
 
 

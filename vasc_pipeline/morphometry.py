@@ -1,6 +1,8 @@
 """Order-wise morphometry of a tree: diameter-defined Strahler orders, elements, statistics.
 
-Pure functions on the tree arrays of SPEC section 7 (NumPy only, no numba):
+Pure functions on the tree arrays of SPEC section 7 (NumPy only, no numba); the
+topology helpers live in :mod:`vasc_pipeline.topology` and the orders in
+:mod:`vasc_pipeline.ordering` (both re-exported here):
 
 - ``parent``   int64 (node,)     parent node, -1 at inlets
 - ``position`` float64 (node, 3) metres
@@ -12,29 +14,8 @@ hold a filler at inlets (0 for orders and lengths, -1 for ids). Several inlets m
 forest; every function handles all trees at once, and diameter-defined orders pool the
 segments of all trees (use :func:`select_trees` first for per-artery orders).
 
-Nodes may be numbered in any order (the anneal's layout puts bifurcations after
-terminals); a topological order is computed by pointer jumping, never by recursion, so
-trees of any depth work. Everything is O(n log n) except the conventional Strahler pass,
-a plain loop over nodes (~10 ms for 12000 nodes).
-
-Diameter-defined Strahler ordering (Jiang, Kassab & Fung 1994; Kassab et al. 1993), the
-"range" reading of ``reference/jiang1994_dd_strahler_algorithm.txt``: starting from
-conventional Strahler orders, every segment gets the order whose diameter interval
-``(B(n-1,n), B(n,n+1)]`` contains its diameter, with
-``B(n,n+1) = [(D_n + SD_n) + (D_{n+1} - SD_{n+1})] / 2``, until fewer than ``tol`` of the
-segments change order. Edge cases, decided here:
-
-- SD is the sample SD (ddof=1); an order holding a single segment has SD 0 in the bounds
-  (its interval is centred on that diameter). In the reported statistics such an SD is
-  NaN, as Kassab leaves it blank.
-- Bounds that are not monotone (heavily overlapping orders) are made non-decreasing by a
-  running maximum; the squeezed order gets an empty interval.
-- An order left empty after a pass drops out: bounds are always formed between
-  consecutive non-empty orders, so an emptied order is never refilled, and at the end
-  the surviving orders are renumbered 1..M in increasing diameter rank.
-- A single order has no bounds: nothing changes.
-- The iteration stops after ``max_iter`` passes even if not converged (``converged`` is
-  then False and the last orders are returned).
+Everything is O(n log n) except the conventional Strahler pass (~10 ms for 12000 nodes).
+Diameter-defined Strahler ordering and its edge cases: see :mod:`vasc_pipeline.ordering`.
 
 Zero-length segments: the anneal's optimal branch points may coincide with their parent
 branch point (the optimum of a three-point junction sits on a vertex), leaving a segment of
@@ -47,11 +28,6 @@ node, and orders the resulting tree, which may have multifurcations: conventiona
 gives ``n + 1`` when the two highest daughter orders are both ``n``; asymmetry ratios use
 the smallest and largest daughter. Zero-length *terminal* segments (a terminal on its
 branch point) are kept: they are outlets with a diameter.
-
-Elements: a segment joins its parent segment's element when both have the same order.
-When several daughters of a branching node share their parent's order (possible with
-diameter-defined orders), only the widest daughter (ties: the lower node index) continues
-the element, so elements are always series runs; the other daughter starts a new element.
 """
 
 from __future__ import annotations
@@ -62,7 +38,33 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-__all__ = [
+from .ordering import (
+    TOP_ORDER,
+    DDSResult,
+    Elements,
+    diameter_defined_strahler,
+    elements,
+    shift_orders,
+    strahler_orders,
+)
+from .topology import (
+    KIND_BIFURCATION,
+    KIND_INLET,
+    KIND_TERMINAL,
+    MIN_SEGMENT_LENGTH,
+    _child_lists,
+    _parent_array,
+    check_tree_arrays,
+    children_of,
+    contract_short_segments,
+    inlet_of,
+    node_depth,
+    segment_lengths,
+    select_trees,
+    topological_order,
+)
+
+__all__ = [  # the topology and ordering names stay importable from here (public API)
     "KIND_INLET",
     "KIND_BIFURCATION",
     "KIND_TERMINAL",
@@ -90,561 +92,8 @@ __all__ = [
     "compare_with_kassab",
 ]
 
-# Same codes as vasc_pipeline.tree; repeated here so this module depends on NumPy alone.
-KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
-TOP_ORDER = 11  # order of the pig coronary trunks (RCA, LAD) in Kassab et al. 1993
 
 SCHEMES = ("diameter_defined", "strahler")
-MIN_SEGMENT_LENGTH = 1e-9  # m: shorter segments between branch points are contracted
-
-
-# --------------------------------------------------------------------------- topology
-
-
-def _parent_array(parent) -> np.ndarray:
-    parent = np.asarray(parent)
-    if parent.ndim != 1 or not np.issubdtype(parent.dtype, np.integer):
-        raise ValueError(f"parent: expected a 1-D integer array, got dtype {parent.dtype} and shape {parent.shape}")
-    parent = parent.astype(np.int64, copy=False)
-    n = parent.size
-    bad = (parent < -1) | (parent >= n) | (parent == np.arange(n))
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"parent: node {i} has parent {int(parent[i])}; accepted values are -1 (inlet) or another "
-            f"node index in [0, {n})"
-        )
-    return parent
-
-
-def _pointer_jump_root(link: np.ndarray) -> np.ndarray:
-    """Root of every node for a forest given as ``link`` (roots point to themselves)."""
-    root = link.copy()
-    for _ in range(max(1, root.size.bit_length()) + 2):
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            return root
-        root = nxt
-    raise ValueError("parent: the parent array has a cycle (some nodes never reach an inlet)")
-
-
-def node_depth(parent) -> np.ndarray:
-    """Number of segments between every node and its inlet.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-        Parent index, -1 at inlets.
-
-    Returns
-    -------
-    int64 (node,)
-        0 at inlets, 1 at an inlet's child, ...
-
-    Raises
-    ------
-    ValueError
-        If the parent array has a cycle.
-
-    Notes
-    -----
-    Pointer jumping: O(n log depth), no recursion.
-    """
-    parent = _parent_array(parent)
-    anc = parent.copy()
-    depth = (parent >= 0).astype(np.int64)
-    for _ in range(max(1, parent.size.bit_length()) + 2):
-        idx = np.flatnonzero(anc >= 0)
-        if idx.size == 0:
-            return depth
-        a = anc[idx]
-        depth[idx] += depth[a]  # right-hand sides are read before any write: a synchronous jump
-        anc[idx] = anc[a]
-    raise ValueError("parent: the parent array has a cycle (some nodes never reach an inlet)")
-
-
-def topological_order(parent) -> np.ndarray:
-    """int64 (node,) node indices sorted by depth: every parent comes before its children."""
-    return np.argsort(node_depth(parent), kind="stable")
-
-
-def inlet_of(parent) -> np.ndarray:
-    """int64 (node,) the inlet (root) node of every node's tree; inlets map to themselves."""
-    parent = _parent_array(parent)
-    link = np.where(parent >= 0, parent, np.arange(parent.size))
-    return _pointer_jump_root(link)
-
-
-def children_of(parent) -> np.ndarray:
-    """Child table of a tree.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-        Parent index, -1 at inlets.
-
-    Returns
-    -------
-    int64 (node, 2)
-        Children of every node in increasing index order, -1 where absent (terminals
-        have none, inlets one).
-
-    Raises
-    ------
-    ValueError
-        If a node has more than two children.
-    """
-    parent = _parent_array(parent)
-    child = np.flatnonzero(parent >= 0)
-    p = parent[child]
-    order = np.argsort(p, kind="stable")  # stable: children stay in increasing index order
-    child, p = child[order], p[order]
-    pos = np.arange(p.size)
-    first = np.ones(p.size, dtype=bool)
-    first[1:] = p[1:] != p[:-1]
-    slot = pos - np.maximum.accumulate(np.where(first, pos, 0))
-    if (slot > 1).any():
-        node = int(p[np.flatnonzero(slot > 1)[0]])
-        raise ValueError(f"parent: node {node} has more than two children")
-    table = np.full((parent.size, 2), -1, dtype=np.int64)
-    table[p, slot] = child
-    return table
-
-
-def _child_lists(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Children of every node, any number: node v's are ``child[start[v]:start[v + 1]]``."""
-    child = np.flatnonzero(parent >= 0)
-    child = child[np.argsort(parent[child], kind="stable")]  # stable: increasing index per node
-    count = np.bincount(parent[child], minlength=parent.size)
-    return np.concatenate(([0], np.cumsum(count))), child
-
-
-def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcations: bool = False) -> None:
-    """Check the tree-array contract; raise ValueError naming the field otherwise.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    kind : int8 (node,)
-        0 inlet (exactly one child, parent -1), 1 bifurcation (two children),
-        2 terminal (no children).
-    radius : float64 (node,), optional
-        Must be finite and > 0 on every segment (every non-inlet node).
-    position : float64 (node, 3), optional
-        Must be finite.
-    multifurcations : bool
-        Accept contracted trees (:func:`contract_short_segments`): inlets with one or
-        more children, branching nodes (kind 1) with two or more.
-    """
-    parent = _parent_array(parent)
-    n = parent.size
-    kind = np.asarray(kind)
-    if kind.shape != (n,):
-        raise ValueError(f"kind: expected shape ({n},) like parent, got {kind.shape}")
-    if not np.isin(kind, (KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL)).all():
-        raise ValueError("kind: accepted values are 0 (inlet), 1 (bifurcation), 2 (terminal)")
-    if n == 0 or not (kind == KIND_INLET).any():
-        raise ValueError("kind: the tree needs at least one inlet (kind 0)")
-    mismatch = (kind == KIND_INLET) != (parent < 0)
-    if mismatch.any():
-        i = int(np.flatnonzero(mismatch)[0])
-        raise ValueError(
-            f"parent/kind: node {i} has kind {int(kind[i])} and parent {int(parent[i])}; inlets "
-            f"(kind 0) and only inlets have parent -1"
-        )
-    n_children = np.bincount(parent[parent >= 0], minlength=n)
-    expected = np.choose(kind.astype(np.int64), (1, 2, 0))
-    bad = (
-        ((n_children < expected) | ((kind == KIND_TERMINAL) & (n_children > 0)))
-        if multifurcations
-        else n_children != expected
-    )
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        need = "at least 1, a branching node at least 2" if multifurcations else "1, a bifurcation 2"
-        raise ValueError(
-            f"parent/kind: node {i} of kind {int(kind[i])} has {int(n_children[i])} children; an "
-            f"inlet needs {need}, a terminal 0"
-        )
-    node_depth(parent)  # raises on cycles
-    if radius is not None:
-        radius = np.asarray(radius, dtype=float)
-        if radius.shape != (n,):
-            raise ValueError(f"radius: expected shape ({n},) like parent, got {radius.shape}")
-        seg = parent >= 0
-        if not (np.isfinite(radius[seg]).all() and (radius[seg] > 0).all()):
-            raise ValueError("radius: every segment (non-inlet node) needs a finite radius > 0 (metres)")
-    if position is not None:
-        position = np.asarray(position, dtype=float)
-        if position.shape != (n, 3):
-            raise ValueError(f"position: expected shape ({n}, 3), got {position.shape}")
-        if not np.isfinite(position).all():
-            raise ValueError("position: all coordinates must be finite (metres)")
-
-
-def select_trees(parent, position, radius, kind, inlets):
-    """The sub-forest of the given inlets, renumbered compactly.
-
-    Parameters
-    ----------
-    parent, position, radius, kind
-        Tree arrays (see module docstring).
-    inlets : int or sequence of int
-        Inlet node indices whose trees to keep.
-
-    Returns
-    -------
-    parent, position, radius, kind : arrays of the sub-forest
-        Nodes keep their relative order; parent indices are renumbered.
-    index : int64 (node_sub,)
-        Original index of every kept node.
-    """
-    parent = _parent_array(parent)
-    inlets = np.atleast_1d(np.asarray(inlets, dtype=np.int64))
-    if ((inlets < 0) | (inlets >= parent.size)).any() or (parent[inlets] != -1).any():
-        raise ValueError(f"inlets: {inlets.tolist()} are not all inlet nodes (parent -1)")
-    index = np.flatnonzero(np.isin(inlet_of(parent), inlets))
-    new = np.full(parent.size, -1, dtype=np.int64)
-    new[index] = np.arange(index.size)
-    sub_parent = np.where(parent[index] >= 0, new[np.maximum(parent[index], 0)], -1)
-    return (sub_parent, np.asarray(position)[index], np.asarray(radius)[index], np.asarray(kind)[index], index)
-
-
-def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGMENT_LENGTH):
-    """Merge every branching node that sits on its parent node into that parent.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    position : float64 (node, 3), metres
-    kind : int8 (node,)
-    min_length : float
-        Segments shorter than this (metres, >= 0) whose child is a branching node
-        (kind 1) are contracted; 0 contracts nothing.
-
-    Returns
-    -------
-    parent : int64 (node_kept,)
-        Parent array of the contracted tree over the kept nodes (renumbered; nodes keep
-        their relative order). A node may now have more than two children.
-    index : int64 (node_kept,)
-        Original index of every kept node (take position, radius and kind with it).
-
-    Examples
-    --------
-    >>> parent, index = contract_short_segments(
-    ...     [-1, 0, 1, 2, 2, 1], [[0, 0, 0], [1, 0, 0], [1, 0, 0], [2, 1, 0], [2, -1, 0], [1, 1, 0]],
-    ...     [0, 1, 1, 2, 2, 2])
-    >>> parent.tolist(), index.tolist()
-    ([-1, 0, 1, 1, 1], [0, 1, 3, 4, 5])
-    """
-    parent = _parent_array(parent)
-    if not (np.isfinite(min_length) and min_length >= 0):
-        raise ValueError(f"min_length: must be a finite length >= 0 (metres), got {min_length}")
-    gone = (parent >= 0) & (np.asarray(kind) == KIND_BIFURCATION) & (segment_lengths(parent, position) < min_length)
-    # every contracted node points to its parent, every kept one to itself: the root of a
-    # node in that forest is its nearest kept ancestor (or itself)
-    kept_ancestor = _pointer_jump_root(np.where(gone, parent, np.arange(parent.size)))
-    index = np.flatnonzero(~gone)
-    new = np.full(parent.size, -1, dtype=np.int64)
-    new[index] = np.arange(index.size)
-    up = parent[index]
-    return np.where(up >= 0, new[kept_ancestor[np.maximum(up, 0)]], -1), index
-
-
-def segment_lengths(parent, position) -> np.ndarray:
-    """Length of every segment.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    position : float64 (node, 3), metres
-
-    Returns
-    -------
-    float64 (node,)
-        Distance from every node to its parent, metres; 0 at inlets.
-    """
-    parent = _parent_array(parent)
-    position = np.asarray(position, dtype=float)
-    length = np.zeros(parent.size)
-    seg = np.flatnonzero(parent >= 0)
-    length[seg] = np.linalg.norm(position[seg] - position[parent[seg]], axis=-1)
-    return length
-
-
-# --------------------------------------------------------------------------- orders
-
-
-def strahler_orders(parent, kind) -> np.ndarray:
-    """Conventional Strahler order of every segment.
-
-    Terminal segments have order 1; at a branching node, the parent segment has order
-    n + 1 if the two highest daughter orders are both n, else the highest daughter order
-    (for a bifurcation: n + 1 if both daughters have order n). An inlet's child segments
-    are ordinary segments. Multifurcations (contracted trees) are accepted.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    kind : int8 (node,)
-
-    Returns
-    -------
-    int64 (node,)
-        Order of the segment ending at each node; 0 at inlets (no segment).
-
-    Examples
-    --------
-    >>> strahler_orders([-1, 0, 1, 1], [0, 1, 2, 2]).tolist()
-    [0, 2, 1, 1]
-    """
-    parent = _parent_array(parent)
-    check_tree_arrays(parent, kind, multifurcations=True)
-    start, child = _child_lists(parent)
-    start, child = start.tolist(), child.tolist()
-    kinds = np.asarray(kind).tolist()
-    order = [0] * parent.size
-    # Children before parents; a plain loop on Python lists beats per-level NumPy
-    # passes on deep (caterpillar-like) trees and costs ~1 us per node.
-    for v in reversed(topological_order(parent).tolist()):
-        k = kinds[v]
-        if k == KIND_TERMINAL:
-            order[v] = 1
-        elif k == KIND_BIFURCATION:
-            top = second = 0
-            for c in child[start[v] : start[v + 1]]:
-                o = order[c]
-                if o > top:
-                    top, second = o, top
-                elif o > second:
-                    second = o
-            order[v] = top + 1 if second == top else top
-    return np.array(order, dtype=np.int64)
-
-
-def _dds_pass(diameter: np.ndarray, order: np.ndarray) -> np.ndarray:
-    """One range reassignment of diameter-defined orders (segments only, no fillers)."""
-    labels, inv = np.unique(order, return_inverse=True)
-    if labels.size < 2:
-        return order.copy()
-    count = np.bincount(inv)
-    mean = np.bincount(inv, weights=diameter) / count
-    ss = np.bincount(inv, weights=(diameter - mean[inv]) ** 2)
-    sd = np.sqrt(ss / np.maximum(count - 1, 1))  # sample SD; 0 for a single-segment order
-    bounds = ((mean[:-1] + sd[:-1]) + (mean[1:] - sd[1:])) / 2
-    bounds = np.maximum.accumulate(bounds)  # non-monotone bounds: the squeezed order empties
-    # order k holds bounds[k-1] < D <= bounds[k]
-    return labels[np.searchsorted(bounds, diameter, side="left")]
-
-
-class DDSResult(NamedTuple):
-    """Result of :func:`diameter_defined_strahler`.
-
-    Attributes
-    ----------
-    orders : int64 (node,)
-        Diameter-defined order of every segment, 1..M; 0 at inlets.
-    n_iter : int
-        Reassignment passes performed.
-    converged : bool
-        True when the last pass changed fewer than ``tol`` of the segments.
-    changed : float64 (n_iter,)
-        Fraction of segments that changed order in each pass.
-    """
-
-    orders: np.ndarray
-    n_iter: int
-    converged: bool
-    changed: np.ndarray
-
-
-def diameter_defined_strahler(parent, radius, kind, max_iter: int = 100, tol: float = 0.01, initial=None) -> DDSResult:
-    """Diameter-defined Strahler orders (Jiang, Kassab & Fung 1994).
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    radius : float64 (node,)
-        Segment radii, metres (the orders are scale-free; any unit works).
-    kind : int8 (node,)
-    max_iter : int
-        Maximum number of reassignment passes (>= 1).
-    tol : float
-        Stop when the fraction of segments changing order in a pass is below this
-        (SPEC: 1 %).
-    initial : int (node,), optional
-        Starting orders; default the conventional Strahler orders.
-
-    Returns
-    -------
-    DDSResult
-        ``orders`` int64 (node,) (0 at inlets), ``n_iter``, ``converged``, ``changed``.
-        See the module docstring for the edge-case rules (single-segment orders,
-        non-monotone bounds, emptied orders).
-
-    Examples
-    --------
-    >>> res = diameter_defined_strahler([-1, 0, 1, 1], [0, 2.0, 1.0, 1.0], [0, 1, 2, 2])
-    >>> res.orders.tolist(), res.n_iter, res.converged
-    ([0, 2, 1, 1], 1, True)
-    """
-    parent = _parent_array(parent)
-    check_tree_arrays(parent, kind, radius=radius, multifurcations=True)
-    if max_iter < 1:
-        raise ValueError(f"max_iter: must be >= 1, got {max_iter}")
-    if not 0 <= tol <= 1:
-        raise ValueError(f"tol: must be a fraction in [0, 1], got {tol}")
-    seg = np.flatnonzero(parent >= 0)
-    diameter = 2.0 * np.asarray(radius, dtype=float)[seg]
-    start = strahler_orders(parent, kind) if initial is None else np.asarray(initial, dtype=np.int64)
-    if start.shape != parent.shape:
-        raise ValueError(f"initial: expected shape {parent.shape} like parent, got {start.shape}")
-    order = start[seg]
-    changed = []
-    converged = False
-    for _ in range(max_iter):
-        new = _dds_pass(diameter, order)
-        changed.append(np.count_nonzero(new != order) / max(order.size, 1))
-        order = new
-        if changed[-1] < tol:
-            converged = True
-            break
-    out = np.zeros(parent.size, dtype=np.int64)
-    out[seg] = np.unique(order, return_inverse=True)[1].reshape(-1) + 1  # renumber 1..M
-    return DDSResult(out, len(changed), converged, np.array(changed))
-
-
-def shift_orders(orders, top: int = TOP_ORDER, mask=None) -> np.ndarray:
-    """Shift orders so that the highest equals ``top``.
-
-    Parameters
-    ----------
-    orders : int (node,) or (k,)
-        Orders, e.g. from :func:`strahler_orders` (0 at inlets).
-    top : int
-        Target highest order (11: Kassab's coronary trunk).
-    mask : bool array like ``orders``, optional
-        Entries to shift; default ``orders > 0`` (leaves the inlets' 0 filler alone).
-
-    Returns
-    -------
-    int64, shape of ``orders``
-        Shifted copy. With trees deeper than ``top`` orders the lowest shifted orders
-        are <= 0; they are kept (and match no Kassab order).
-
-    Examples
-    --------
-    >>> shift_orders([0, 1, 2, 3]).tolist()
-    [0, 9, 10, 11]
-    """
-    orders = np.asarray(orders, dtype=np.int64)
-    mask = orders > 0 if mask is None else np.asarray(mask, dtype=bool)
-    out = orders.copy()
-    if mask.any():
-        out[mask] += int(top) - int(orders[mask].max())
-    return out
-
-
-# --------------------------------------------------------------------------- elements
-
-
-class Elements(NamedTuple):
-    """Elements of a tree (result of :func:`elements`); ``n_el`` elements.
-
-    Attributes
-    ----------
-    segment_element : int64 (node,)
-        Element id of every segment, -1 at inlets. Ids are 0..n_el-1, in increasing
-        node index of the element's head.
-    order : int64 (n_el,)
-        Order of the element (of all its segments).
-    diameter : float64 (n_el,)
-        Mean diameter of its segments (units of the input).
-    length : float64 (n_el,)
-        Summed length of its segments (units of the input).
-    n_segments : int64 (n_el,)
-        Number of segments.
-    head : int64 (n_el,)
-        Most proximal segment (its node index).
-    parent_element : int64 (n_el,)
-        Element of the head's parent segment; -1 when the head hangs from an inlet.
-    """
-
-    segment_element: np.ndarray
-    order: np.ndarray
-    diameter: np.ndarray
-    length: np.ndarray
-    n_segments: np.ndarray
-    head: np.ndarray
-    parent_element: np.ndarray
-
-
-def elements(parent, orders, diameter, length) -> Elements:
-    """Group segments into elements: maximal series runs of same-order segments.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    orders : int (node,)
-        Order of every segment (inlet entries are ignored).
-    diameter : float64 (node,)
-        Segment diameters (2 * radius), metres.
-    length : float64 (node,)
-        Segment lengths, metres (:func:`segment_lengths`).
-
-    Returns
-    -------
-    Elements
-        A segment continues its parent segment's element when both have the same order;
-        if both daughters qualify, the wider one (ties: lower node index) continues and
-        the other starts a new element.
-
-    Examples
-    --------
-    >>> el = elements([-1, 0, 1, 1], [0, 1, 1, 1], [0, 3.0, 2.0, 1.0], [0, 1.0, 1.0, 1.0])
-    >>> el.segment_element.tolist(), el.diameter.tolist(), el.length.tolist()
-    ([-1, 0, 0, 1], [2.5, 1.0], [2.0, 1.0])
-    """
-    parent = _parent_array(parent)
-    orders = np.asarray(orders, dtype=np.int64)
-    diameter = np.asarray(diameter, dtype=float)
-    length = np.asarray(length, dtype=float)
-    n = parent.size
-    for name, arr in (("orders", orders), ("diameter", diameter), ("length", length)):
-        if arr.shape != (n,):
-            raise ValueError(f"{name}: expected shape ({n},) like parent, got {arr.shape}")
-    seg = np.flatnonzero(parent >= 0)
-    # candidates: segments whose parent node is itself a segment of the same order
-    s = seg[parent[parent[seg]] >= 0]
-    s = s[orders[s] == orders[parent[s]]]
-    p = parent[s]
-    rank = np.lexsort((s, -diameter[s], p))  # per parent: widest first, then lowest index
-    s, p = s[rank], p[rank]
-    first = np.ones(s.size, dtype=bool)
-    first[1:] = p[1:] != p[:-1]
-    cont = s[first]
-    link = np.arange(n)
-    link[cont] = parent[cont]
-    head_of = _pointer_jump_root(link)
-    head, eid = np.unique(head_of[seg], return_inverse=True)
-    eid = eid.reshape(-1)
-    segment_element = np.full(n, -1, dtype=np.int64)
-    segment_element[seg] = eid
-    n_segments = np.bincount(eid, minlength=head.size)
-    el_diameter = np.bincount(eid, weights=diameter[seg], minlength=head.size) / n_segments
-    el_length = np.bincount(eid, weights=length[seg], minlength=head.size)
-    up = parent[head]
-    parent_element = np.where(up >= 0, segment_element[np.maximum(up, 0)], -1)
-    return Elements(
-        segment_element,
-        orders[head].copy(),
-        el_diameter,
-        el_length,
-        n_segments.astype(np.int64),
-        head.astype(np.int64),
-        parent_element,
-    )
 
 
 # --------------------------------------------------------------------------- statistics

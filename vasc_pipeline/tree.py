@@ -14,6 +14,7 @@ import numpy as np
 
 from . import rng as _rng
 from .tissue import Tissue
+from .topology import KIND_BIFURCATION, KIND_INLET, KIND_TERMINAL, children_of, terminals_downstream
 
 __all__ = [
     "KIND_INLET",
@@ -27,8 +28,6 @@ __all__ = [
     "load_terminal_sites",
     "TreeError",
 ]
-
-KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
 
 
 class TreeError(ValueError):
@@ -82,28 +81,18 @@ def node_kinds(n_terminals: int, n_inlets: int) -> np.ndarray:
 
 def children_from_parent(parent: np.ndarray) -> np.ndarray:
     """(2N, 2) child table from a parent array, children in increasing index order."""
-    children = np.full((parent.size, 2), -1, dtype=np.int64)
-    for node in np.flatnonzero(parent >= 0):
-        p = parent[node]
-        slot = 0 if children[p, 0] < 0 else 1
-        if children[p, slot] >= 0:
-            raise TreeError(f"node {p} has more than two children")
-        children[p, slot] = node
-    return children
+    try:
+        return children_of(parent)
+    except ValueError as exc:
+        raise TreeError(str(exc)) from exc
 
 
 def count_terminals(parent: np.ndarray, n_terminals: int, n_inlets: int) -> np.ndarray:
-    """Terminals downstream of every node, recounted from ``parent`` alone (path walk)."""
-    counts = np.zeros(parent.size, dtype=np.int64)
-    for t in range(n_inlets, n_inlets + n_terminals):
-        node, steps = t, 0
-        while node >= 0:
-            counts[node] += 1
-            node = parent[node]
-            steps += 1
-            if steps > parent.size:
-                raise TreeError(f"cycle above terminal {t}")
-    return counts
+    """Terminals downstream of every node, recounted from ``parent`` alone."""
+    try:
+        return terminals_downstream(parent, node_kinds(n_terminals, n_inlets))
+    except ValueError as exc:  # a cycle, or an index out of range
+        raise TreeError(str(exc)) from exc
 
 
 def random_terminal_sites(tissue: Tissue, n_terminals: int, state: np.ndarray) -> np.ndarray:
