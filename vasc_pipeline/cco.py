@@ -466,6 +466,7 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         _add(costs, compensation, 1, float(w_pow[1]) * seg_length[t])
         trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
     voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
+    # one argument per flat array, as _grow's signature lists them (numba takes no struct)
     drawn, factor = _grow(
         parent,
         children,
