@@ -13,10 +13,18 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from . import heart
-from .grid import Tissue, TissueError, default_voxel_size, voxelize
+from .grid import VOXELS_PER_SUPPLY_RADIUS, Tissue, TissueError, default_voxel_size, voxelize
 from .shapes import box, mask, plane2d, sphere
 
-__all__ = ["Tissue", "TissueError", "build_tissue", "voxelize", "default_voxel_size", "TISSUES"]
+__all__ = [
+    "Tissue",
+    "TissueError",
+    "build_tissue",
+    "voxelize",
+    "default_voxel_size",
+    "VOXELS_PER_SUPPLY_RADIUS",
+    "TISSUES",
+]
 
 TISSUES: dict[str, Callable[..., Tissue]] = {
     "heart": heart.heart_tissue,
