@@ -59,6 +59,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclude_cavities": False,
     "tissue.exclusion_path": None,
     "tissue.exclusion_array": None,
+    "tissue.inlet_share": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -90,6 +91,9 @@ class TissueConfig:
     inlets: Optional[list[list[float]]] = None  # mask: inlet positions, m
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
     exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
+    # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
+    # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
+    inlet_share: Optional[list[float]] = None
 
 
 @dataclass
@@ -257,6 +261,20 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    share = cfg.tissue.inlet_share
+    if share is not None:
+        if not share or any(not (s > 0) for s in share) or abs(sum(share) - 1.0) > 1e-6:
+            raise ConfigError(
+                f"tissue.inlet_share must list one fraction > 0 per inlet, summing to 1 (heart: [LCA, RCA], "
+                f"e.g. [0.62, 0.38]), got {list(share)}"
+            )
+        if cfg.method.name == "cco" or cfg.anneal.init == "cco":
+            raise ConfigError(
+                "tissue.inlet_share fixes the terminals of every inlet, which the CCO growth (method=cco, "
+                "anneal.init=cco) assigns by connection: leave it unset (null) there"
+            )
+        if cfg.n_terminals < len(share):
+            raise ConfigError(f"n_terminals={cfg.n_terminals} is too small for {len(share)} inlet shares")
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))

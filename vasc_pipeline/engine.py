@@ -114,6 +114,12 @@ def build_problem(config: Any) -> Problem:
     k = len(tissue.inlets)
     if n < k:
         raise TreeError(f"n_terminals must be >= the number of inlets ({k}) of tissue {tissue.name!r}, got {n}")
+    share = cfg.tissue.inlet_share
+    if share is not None and len(share) != k:
+        names = ", ".join(tissue.inlet_names)
+        raise TreeError(
+            f"tissue.inlet_share lists {len(share)} fractions; tissue {tissue.name!r} has {k} inlets ({names})"
+        )
     p = cfg.physics
     physics = Physics(
         n_terminals=n,
@@ -194,6 +200,7 @@ def build_problem(config: Any) -> Problem:
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
         early_reject=True,
+        fixed_inlet_counts=cfg.tissue.inlet_share is not None,
     )
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
@@ -220,7 +227,9 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
 
         tree = grow_tree(problem, rng)[0]
     else:
-        tree = random_tree(problem.tissue, problem.physics.n_terminals, rng, problem.sites)
+        tree = random_tree(
+            problem.tissue, problem.physics.n_terminals, rng, problem.sites, problem.config.tissue.inlet_share
+        )
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = restore_state(

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import kernel
 from .geometry import optimal_bifurcations, vascular_cost, vascular_weights
+from .topology import inlet_of
 from .tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 __all__ = ["polish", "descend_swaps"]
@@ -119,12 +120,15 @@ def descend_swaps(problem, state: kernel.State, max_rounds: int = 20) -> int:
         parent = state.parent.copy()
         tree = Tree(parent, state.children.copy(), state.position.copy(), state.n_downstream.copy(), k)
         vascular = vascular_cost(tree.position, parent, vascular_weights(tree, physics))
+        inlet = inlet_of(parent)
         candidates = []
         for a in range(k, parent.size):
             ancestors_a = _ancestors(parent, a)
             for b in range(a + 1, parent.size):
                 if parent[a] == parent[b] or b in ancestors_a or a in _ancestors(parent, b):
                     continue
+                if model.fixed_inlet_counts and inlet[a] != inlet[b] and tree.n_downstream[a] != tree.n_downstream[b]:
+                    continue  # tissue.inlet_share, as in the kernel's swap
                 trial = parent.copy()
                 trial[a], trial[b] = parent[b], parent[a]
                 t = Tree(trial, children_from_parent(trial), tree.position.copy(), count_terminals(trial, n, k), k)

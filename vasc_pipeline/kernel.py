@@ -71,6 +71,7 @@ Model = namedtuple(
         "step_max",  # step_max float64 (2,) m: the configured half-widths
         "early_reject",  # skip the exclusion traversals when a lower bound of ΔC fails Metropolis
         # (same decisions and random stream either way; False only to test that)
+        "fixed_inlet_counts",  # tissue.inlet_share: a swap between inlet trees must keep their terminal counts
     ],
 )
 
@@ -989,6 +990,8 @@ def _swap_nodes(model, state, a, b, temp):
             lca = x
             break
         x = parent[x]
+    if lca == -1 and model.fixed_inlet_counts and state.n_downstream[a] != state.n_downstream[b]:
+        return ILLEGAL
     # volume and power: n changes on the paths from the old parents up to the LCA, and the
     # two moved segments change length (their own n does not change)
     na = state.n_downstream[a]

@@ -23,6 +23,7 @@ __all__ = [
     "Tree",
     "node_kinds",
     "random_tree",
+    "inlet_counts",
     "count_terminals",
     "check_tree",
     "load_terminal_sites",
@@ -109,13 +110,21 @@ def random_terminal_sites(tissue: Tissue, n_terminals: int, state: np.ndarray) -
     return centre + offset
 
 
-def random_tree(tissue: Tissue, n_terminals: int, state: np.ndarray, sites: np.ndarray | None = None) -> Tree:
+def random_tree(
+    tissue: Tissue,
+    n_terminals: int,
+    state: np.ndarray,
+    sites: np.ndarray | None = None,
+    inlet_share: list[float] | None = None,
+) -> Tree:
     """Random initial tree (SPEC section 2).
 
     Terminals uniformly at random in the tissue (or at ``sites``), each assigned to a
     uniformly random inlet (every inlet gets at least one), a random topology per inlet
     by repeatedly joining two random subtrees, each bifurcation placed at the mean of its
-    children. All randomness comes from ``state`` (advanced in place).
+    children. All randomness comes from ``state`` (advanced in place). With
+    ``inlet_share`` (one fraction per inlet) inlet k gets :func:`inlet_counts` terminals,
+    a random set of them.
     """
     n_inlets = len(tissue.inlets)
     if n_terminals < max(2, n_inlets):
@@ -132,9 +141,12 @@ def random_tree(tissue: Tissue, n_terminals: int, state: np.ndarray, sites: np.n
         j = _rng.next_below(state, i + 1)
         order[i], order[j] = order[j], order[i]
     inlet_of = np.empty(n_terminals, dtype=np.int64)
-    inlet_of[order[:n_inlets] - n_inlets] = np.arange(n_inlets)
-    for t in order[n_inlets:]:
-        inlet_of[t - n_inlets] = _rng.next_below(state, n_inlets)
+    if inlet_share is not None:
+        inlet_of[order - n_inlets] = np.repeat(np.arange(n_inlets), inlet_counts(inlet_share, n_terminals))
+    else:
+        inlet_of[order[:n_inlets] - n_inlets] = np.arange(n_inlets)
+        for t in order[n_inlets:]:
+            inlet_of[t - n_inlets] = _rng.next_below(state, n_inlets)
     next_bif = n_inlets + n_terminals
     for k in range(n_inlets):
         roots = list(terminals[inlet_of == k])
@@ -150,6 +162,26 @@ def random_tree(tissue: Tissue, n_terminals: int, state: np.ndarray, sites: np.n
         parent[roots[0]] = k
     children = children_from_parent(parent)
     return Tree(parent, children, position, count_terminals(parent, n_terminals, n_inlets), n_inlets)
+
+
+def inlet_counts(inlet_share, n_terminals: int) -> np.ndarray:
+    """Terminals per inlet for the fractions ``inlet_share``: largest remainders, at least one each.
+
+    >>> inlet_counts([0.62, 0.38], 1000).tolist()
+    [620, 380]
+    """
+    share = np.asarray(inlet_share, dtype=float)
+    if share.ndim != 1 or share.size < 1 or (share <= 0).any() or n_terminals < share.size:
+        raise TreeError(f"inlet_share: {share.tolist()} needs one fraction > 0 per inlet and n_terminals >= that")
+    exact = share / share.sum() * n_terminals
+    counts = np.maximum(np.floor(exact).astype(np.int64), 1)
+    for i in np.argsort(-(exact - np.floor(exact)), kind="stable"):  # hand out what rounding left
+        if counts.sum() >= n_terminals:
+            break
+        counts[i] += 1
+    while counts.sum() > n_terminals:  # the minimum of one per inlet overshot
+        counts[np.argmax(counts)] -= 1
+    return counts
 
 
 def check_tree(tree: Tree, tissue: Tissue | None = None) -> None:
