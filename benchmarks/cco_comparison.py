@@ -28,7 +28,6 @@ mean over pairs of seeds of the symmetric mean distance between their trunk cent
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import os
@@ -43,62 +42,15 @@ TISSUE = ["tissue=heart"]
 # growth does not see; heart_no_exclusion: A_o = 0, so both minimise the same C_v + C_w.
 CASES = {"heart": [], "heart_no_exclusion": ["physics.A_o=0"]}
 ARTERIES = ("RCA", "LAD", "LCX")
-TRUNK_FRACTION = 1.0 / 8.0
-TRUNK_POINTS = 64
 
 
 # --------------------------------------------------------------------------------------------
 # Measures of one tree
 
 
-def trunks(parent: np.ndarray, position: np.ndarray, n_down: np.ndarray, n_inlets: int) -> list[np.ndarray]:
-    """Per inlet, the main trunk's centre-line (M, 3): from the inlet down the larger child
-    while that child carries at least TRUNK_FRACTION of the inlet's terminals."""
-    children = [[] for _ in range(parent.size)]
-    for i, p in enumerate(parent):
-        if p >= 0:
-            children[p].append(i)
-    out = []
-    for k in range(n_inlets):
-        path, node = [k], k
-        while children[node]:
-            nxt = max(children[node], key=lambda c: (n_down[c], -c))
-            if n_down[nxt] < TRUNK_FRACTION * n_down[k] and len(path) > 1:
-                break
-            path.append(nxt)
-            node = nxt
-        out.append(position[path])
-    return out
-
-
-def resample(line: np.ndarray, m: int = TRUNK_POINTS) -> np.ndarray:
-    """``m`` points equally spaced by arc length along a polyline."""
-    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] == 0.0:
-        return np.repeat(line[:1], m, axis=0)
-    t = np.linspace(0.0, s[-1], m)
-    return np.stack([np.interp(t, s, line[:, c]) for c in range(3)], axis=1)
-
-
-def _point_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    a, b = line[:-1], line[1:]
-    if len(a) == 0:
-        return np.linalg.norm(points - line[0], axis=1)
-    e = b - a
-    ee = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
-    d = points[:, None, :] - a[None]
-    t = np.clip(np.einsum("pij,ij->pi", d, e) / ee, 0.0, 1.0)
-    return np.min(np.linalg.norm(d - t[..., None] * e[None], axis=2), axis=1)
-
-
-def trunk_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Symmetric mean distance [m] between two centre-lines."""
-    return 0.5 * (float(np.mean(_point_polyline(resample(a), b))) + float(np.mean(_point_polyline(resample(b), a))))
-
-
-def tree_measures(parent, position, radius, kind, n_down, n_inlets, gamma) -> dict:
+def tree_measures(parent, position, radius, kind, gamma) -> dict:
     from vasc_pipeline.morphometry import compare_with_kassab, morphometry
+    from vasc_pipeline.similarity import main_trunks, resample_polyline
 
     ds = morphometry(parent, position, radius, kind).sel(scheme="diameter_defined")
     orders = [int(o) for o in ds.order.values]
@@ -110,7 +62,7 @@ def tree_measures(parent, position, radius, kind, n_down, n_inlets, gamma) -> di
         "symmetric_ratio": 2.0 ** (-1.0 / gamma),
     }
     out["kassab"] = {a: float(compare_with_kassab(ds, a).attrs["mean_abs_log10_ratio"]) for a in ARTERIES}
-    out["trunks"] = [resample(t).tolist() for t in trunks(parent, position, n_down, n_inlets)]
+    out["trunks"] = [resample_polyline(t).tolist() for t in main_trunks(parent, position, kind)]
     return out
 
 
@@ -126,8 +78,6 @@ def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, w
         tree.position,
         node_radii(tree, physics),
         tree.kind,
-        tree.n_downstream,
-        tree.n_inlets,
         physics.gamma,
     )
     return {
@@ -219,6 +169,8 @@ def _fmt(mean: float, se: float, scale: float = 1.0, digits: int = 4) -> str:
 
 
 def summarise(rows: list[dict]) -> dict:
+    from vasc_pipeline.similarity import trunk_spread
+
     tables = {"energy": [], "asymmetry": [], "order": [], "kassab": []}
     for n in sorted({r["n"] for r in rows}):
         by = {k: [r for r in rows if r["n"] == n and r["method"] == k] for k in ("cco", "anneal", "cco_grown")}
@@ -255,15 +207,7 @@ def summarise(rows: list[dict]) -> dict:
                     }
                 )
             # trunk spread between seeds
-            pairs = []
-            for a, b in itertools.combinations(sel, 2):
-                pairs.append(
-                    float(
-                        np.mean(
-                            [trunk_distance(np.array(ta), np.array(tb)) for ta, tb in zip(a["trunks"], b["trunks"])]
-                        )
-                    )
-                )
+            pairs = trunk_spread([[np.array(t) for t in r["trunks"]] for r in sel]).tolist()
             tables["order"].append({"n": n, "method": k, "pairs": len(pairs), "trunk_spread_m": _mean_se(pairs)})
             tables["kassab"].append(
                 {"n": n, "method": k, **{a: _mean_se(r["kassab"][a] for r in sel) for a in ARTERIES}}
