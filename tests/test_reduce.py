@@ -8,6 +8,7 @@ The sweeps are tiny (16/24 terminals, 5e4 proposals) and run in this process wit
 from __future__ import annotations
 
 import io
+import itertools
 import os
 import subprocess
 import sys
@@ -78,6 +79,23 @@ def test_lowest_cost_seed_is_chosen_in_every_cell(swept, summary):
         assert c["is_best"].sel(point).values.tolist() == [int(s == best_seed) for s in sorted(by_seed)]
     # the seeds really differ, so choosing is not trivial
     assert any(len(set(v.values())) > 1 for v in costs.values())
+
+
+def test_trunk_spread_measures_how_alike_the_seeds_trees_are(swept, summary):
+    from vasc_pipeline.similarity import main_trunks, trunk_distance
+
+    _, jobs, _, _ = swept
+    spread = summary["morphometry"]["trunk_spread"]
+    assert spread.attrs["units"] == "m"
+    for (n, m_b), cell in itertools.groupby(
+        sorted(jobs, key=lambda j: (j.coords["n_terminals"], j.coords["m_b"])),
+        key=lambda j: (j.coords["n_terminals"], j.coords["m_b"]),
+    ):
+        trees = [store.RunStore.open(j.store, mode="r").read_tree() for j in cell]
+        trunks = [main_trunks(t["parent"], t["position"], t["kind"])[0] for t in trees]  # one inlet (sphere)
+        pairs = [trunk_distance(a, b) for a, b in itertools.combinations(trunks, 2)]
+        value = float(spread.sel(n_terminals=n, m_b=m_b))
+        assert value == pytest.approx(np.mean(pairs), rel=1e-12) and value > 0
 
 
 def test_morphometry_is_that_of_the_best_tree(swept, summary):

@@ -11,7 +11,8 @@ anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
 
 - ``/morphometry``  (cell..., scheme, order): element and segment diameter/length mean, SD,
   SE and counts of the best tree; per cell ``best_seed``, ``best_run_id``, ``best_cost``,
-  ``n_seeds``.
+  ``n_seeds`` and ``trunk_spread`` (how alike the seeds' trees are: mean distance between
+  their main trunks, m).
 - ``/asymmetry``    (cell..., scheme, order): D_s/D_p and D_l/D_p by parent order, and
   ``symmetric_ratio`` = 2^(-1/gamma) per cell.
 - ``/costs``        (cell..., seed): final costs (annealed total and every unscaled term),
@@ -41,6 +42,7 @@ import xarray as xr
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
 from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
+from .similarity import main_trunks, trunk_spread
 from .store import TRACE_FIELDS, RunStore
 
 __all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
@@ -130,6 +132,17 @@ def _cell_var(best: dict[tuple, RunInfo], getter, dtype, units: str | None, long
 def _morphometry_of(run: RunInfo) -> xr.Dataset:
     tree = RunStore.open(run.path, mode="r").read_tree()
     return _m.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
+
+
+def _trunk_spread_of(cell_runs: list[RunInfo]) -> float:
+    """Mean over pairs of seeds of the trunk distance (:mod:`vasc_pipeline.similarity`); NaN for one seed."""
+    if len(cell_runs) < 2:
+        return float("nan")
+    trunks = []
+    for r in cell_runs:
+        tree = RunStore.open(r.path, mode="r").read_tree()
+        trunks.append(main_trunks(tree["parent"], tree["position"], tree["kind"]))
+    return float(np.mean(trunk_spread(trunks)))
 
 
 _ASYMMETRY_VARS = (
@@ -245,6 +258,17 @@ def build_summary(
         "n_seeds": {
             k: xr.DataArray(np.int64(n), attrs={"units": "1", "long_name": "complete runs (seeds) in the cell"})
             for k, n in n_seeds.items()
+        },
+        "trunk_spread": {
+            k: xr.DataArray(
+                _trunk_spread_of([r for r in runs if r.cell(dims) == k]),
+                attrs={
+                    "units": "m",
+                    "long_name": "mean distance between the main trunks of two seeds, over pairs of seeds "
+                    "(vasc_pipeline.similarity; NaN with one seed)",
+                },
+            )
+            for k in best
         },
     }
     for name, values in extra.items():
