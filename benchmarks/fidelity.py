@@ -18,7 +18,8 @@ level):
 
 One JSON line per run, then mean ± SE over seeds per (variant, budget, N):
 
-    python benchmarks/fidelity.py /work/bench/ttq /work/bench/fid > fidelity_rows.jsonl
+    python benchmarks/time_to_quality.py --out results/ttq --anneal fast_v1 --seeds 0 1 2 3
+    python benchmarks/fidelity.py results/ttq | grep "^{" > fidelity_rows.jsonl
     python benchmarks/fidelity.py --quick          # a tiny run in a temporary dir: wiring only
 """
 
