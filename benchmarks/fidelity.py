@@ -28,13 +28,12 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+from time_to_quality import ARTERIES, jobs_for, morphometry_row, run_one
 
-ARTERIES = ("RCA", "LAD", "LCX")
 KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
 KASSAB_TOP_ORDER = {"RCA": 11, "LAD": 11, "LCX": 10}  # each artery's trunk order in Tables 1-3
 
@@ -52,18 +51,6 @@ def kassab_ratio() -> float:
 
     lad = kassab_dataset().sel(artery="LAD", level="element")
     return diameter_ratio_per_order(lad.order.values[KASSAB_FIT_ORDERS], lad.D_mean.values[KASSAB_FIT_ORDERS])
-
-
-def terminal_aligned(morph):
-    """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest diameter."""
-    from vasc_pipeline.reference import kassab_dataset
-
-    dds = morph.sel(scheme="diameter_defined")
-    present = dds.order.values[(dds.element_count > 0).values]
-    lad = kassab_dataset().sel(artery="LAD", level="element")
-    d_low = float(dds.element_diameter_mean.sel(order=present.min()))
-    target = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))])
-    return morph.assign_coords(order=morph.order + (target - int(present.min()))), target - int(present.min())
 
 
 def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
@@ -155,23 +142,8 @@ def row_of(path: Path, root: Path) -> dict:
     present = (dds.element_count > 0).values
     orders = dds.order.values[present]
     row["n_contracted_segments"] = int(morph.attrs["n_contracted_segments"])
-    row["n_orders"] = int(present.sum())
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
-    row["orders"] = {
-        int(o): {
-            "elements": int(dds.element_count.sel(order=o)),
-            "segments_per_element": float(dds.segments_per_element.sel(order=o)),
-            "diameter_um": float(dds.element_diameter_mean.sel(order=o)) * 1e6,
-            "length_mm": float(dds.element_length_mean.sel(order=o)) * 1e3,
-        }
-        for o in orders
-    }
-    aligned, row["terminal_aligned_shift"] = terminal_aligned(morph)
-    for artery in ARTERIES:
-        for suffix, ds in (("", morph), ("_terminal_aligned", aligned)):
-            table = morphometry.compare_with_kassab(ds, artery)
-            row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
-            row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    row.update(morphometry_row(morph))
     if {"LCA", "RCA"} <= set(tissue.inlet_names):
         for artery, sub in per_artery_trees(tree, tissue.inlet_names).items():
             top = int(KASSAB_TOP_ORDER[artery])
@@ -264,9 +236,6 @@ def main(argv: list[str] | None = None) -> list[dict]:
     args = parser.parse_args(argv)
     tmp = None
     if args.quick:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from time_to_quality import jobs_for, run_one
-
         tmp = tempfile.TemporaryDirectory()
         args.roots = [Path(tmp.name)]
         for job in jobs_for(args.roots[0], "fast_v1", 1.0, 40, [0], 20_000, ["anneal.trace_every=10000"]):

@@ -79,10 +79,48 @@ def run_one(j) -> str:
     return j.store
 
 
+def terminal_aligned(morph):
+    """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest mean element
+    diameter instead of its trunk on order 11 (the fidelity issue's alternative), and the shift."""
+    from vasc_pipeline.reference import kassab_dataset
+
+    dds = morph.sel(scheme="diameter_defined")
+    lowest = int(dds.order.values[(dds.element_count > 0).values].min())
+    lad = kassab_dataset().sel(artery="LAD", level="element")
+    d_low = float(dds.element_diameter_mean.sel(order=lowest))
+    shift = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))]) - lowest
+    return morph.assign_coords(order=morph.order + shift), shift
+
+
+def morphometry_row(morph) -> dict:
+    """The morphometry part of a row: ``n_orders``, per order what the errors are made of, and
+    the errors against Kassab under both alignments (trunk = 11, terminal order aligned)."""
+    from vasc_pipeline import morphometry
+
+    dds = morph.sel(scheme="diameter_defined")
+    present = dds["element_count"] > 0
+    row = {"n_orders": int(present.sum())}
+    row["orders"] = {  # per order (trunk = 11): what the errors are made of
+        int(o): {
+            "elements": int(dds["element_count"].sel(order=o)),
+            "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
+            "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
+            "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3,
+        }
+        for o in dds.order.values[present.values]
+    }
+    realigned, row["terminal_aligned_shift"] = terminal_aligned(morph)
+    for artery in ARTERIES:
+        for suffix, ds in (("", morph), ("_terminal_aligned", realigned)):
+            table = morphometry.compare_with_kassab(ds, artery)
+            row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
+            row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    return row
+
+
 def row_of(store_path: str, schedule: str, budget: float) -> dict:
     """The benchmark's row of a complete run store."""
     from vasc_pipeline import morphometry
-    from vasc_pipeline.reference import kassab_dataset
     from vasc_pipeline.store import RunStore
 
     store = RunStore.open(store_path, mode="r")
@@ -103,34 +141,7 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
         "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
     }
     tree = store.read_tree()
-    morph = morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
-    dds = morph.sel(scheme="diameter_defined")
-    present = dds["element_count"] > 0
-    row["n_orders"] = int(present.sum())
-    row["orders"] = {  # per order (trunk = 11): what the errors are made of
-        int(o): {
-            "elements": int(dds["element_count"].sel(order=o)),
-            "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
-            "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
-            "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3,
-        }
-        for o in dds.order.values[present.values]
-    }
-    # The alternative alignment (fidelity issue): the model's terminal order placed on the
-    # Kassab order of nearest mean element diameter (LAD), instead of its trunk on order 11.
-    lad = kassab_dataset().sel(artery="LAD", level="element")
-    lowest = int(dds.order.values[present.values].min())
-    d_low = float(dds["element_diameter_mean"].sel(order=lowest))
-    target = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))])
-    realigned = morph.assign_coords(order=morph.order + (target - lowest))
-    row["terminal_aligned_shift"] = target - lowest
-    for artery in ARTERIES:
-        table = morphometry.compare_with_kassab(morph, artery)
-        row[f"diameter_error_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
-        row[f"length_error_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
-        aligned = morphometry.compare_with_kassab(realigned, artery)
-        row[f"diameter_error_terminal_aligned_{artery}"] = aligned.attrs["mean_abs_log10_ratio_diameter"]
-        row[f"length_error_terminal_aligned_{artery}"] = aligned.attrs["mean_abs_log10_ratio_length"]
+    row.update(morphometry_row(morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
     row["store"] = store_path
     return row
 
