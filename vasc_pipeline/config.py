@@ -273,8 +273,6 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "tissue.inlet_share fixes the terminals of every inlet, which the CCO growth (method=cco, "
                 "anneal.init=cco) assigns by connection: leave it unset (null) there"
             )
-        if cfg.n_terminals < len(share):
-            raise ConfigError(f"n_terminals={cfg.n_terminals} is too small for {len(share)} inlet shares")
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
