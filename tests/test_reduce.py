@@ -342,29 +342,26 @@ def test_sweep_reduces_at_the_end_and_a_failed_reduction_loses_no_run(tmp_path, 
 
 def test_stage_reduce_on_the_command_line(swept, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+
+    def reduce_stage(output_dir):
+        return subprocess.run(
+            [sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={output_dir}"],
+            env=env,
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+
     out = swept[0]
     before = (out / "runs").stat().st_mtime_ns
-    proc = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={out}"],
-        env=env,
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    proc = reduce_stage(out)
     assert proc.returncode == 0, proc.stderr
     assert "mean |log10 model/Kassab|" in proc.stdout + proc.stderr
     assert (out / "runs").stat().st_mtime_ns == before  # no run was touched
     assert xr.open_datatree(out / "summary.zarr", engine="zarr").attrs["n_runs"] == 12
     # nothing to reduce: a clear error and status 2
-    proc = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline", "+stage=reduce", f"output_dir={tmp_path / 'x'}"],
-        env=env,
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    proc = reduce_stage(tmp_path / "x")
     assert proc.returncode == 2 and "nothing to reduce" in proc.stderr
 
 
