@@ -211,6 +211,11 @@ def _occupy(i: int) -> int:
     return i
 
 
+def _run_tasks_held(dask_worker) -> list[str]:
+    """The sweep's run tasks a worker still holds (run on its event loop by Client.run)."""
+    return [str(key) for key in dask_worker.state.tasks if str(key).startswith("vasc-run-")]
+
+
 def test_4_jobs_no_worker_ever_starts_end_the_sweep(tmp_path):
     """Workers that never take the sweep's job (here: busy with other work) stop it after the timeout."""
     from distributed import Client, LocalCluster
@@ -232,6 +237,10 @@ def test_4_jobs_no_worker_ever_starts_end_the_sweep(tmp_path):
                     tiny(tmp_path, "cluster.startup_timeout=3"), client=client, stream=io.StringIO(), reduce=False
                 )
             assert time.monotonic() - started < TIMEOUT
+            # The cancel reaches the worker asynchronously: open the gate only once the worker has
+            # dropped the run's task, or the freed thread may take it first (the store is then complete).
+            while any(client.run(_run_tasks_held).values()) and time.monotonic() - started < TIMEOUT:
+                time.sleep(0.05)
         finally:
             _GATE.set()
             client.gather(busy)
