@@ -146,22 +146,24 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
     return row
 
 
+SUMMARY_FIELDS = [  # what summarise averages over seeds
+    "wall_seconds",
+    "moves_per_second",
+    "cost_supply",
+    "cost_vascular",
+    "cavity_share",
+    "n_orders",
+    *(f"{q}_error_{a}" for q in ("diameter", "length") for a in ARTERIES),
+]
+
+
 def summarise(rows: list[dict]) -> list[dict]:
     """Mean and standard error over seeds per (N, schedule, budget)."""
-    names = [
-        "wall_seconds",
-        "moves_per_second",
-        "cost_supply",
-        "cost_vascular",
-        "cavity_share",
-        "n_orders",
-        *(f"{q}_error_{a}" for q in ("diameter", "length") for a in ARTERIES),
-    ]
     table = []
     for key in sorted({(r["n_terminals"], r["anneal"], r["budget"]) for r in rows}):
         sel = [r for r in rows if (r["n_terminals"], r["anneal"], r["budget"]) == key]
         entry = {"n_terminals": key[0], "anneal": key[1], "budget": key[2], "steps": sel[0]["steps"], "seeds": len(sel)}
-        for name in names:
+        for name in SUMMARY_FIELDS:
             v = np.array([r[name] for r in sel], dtype=float)
             entry[name] = float(v.mean())
             entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")

@@ -33,6 +33,9 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
         assert all(r["ns_per_move"]["all"] > 0 for r in records)
     if script.stem == "kernel_throughput":
         assert all(r["moves_per_second"] > 0 for r in records)
+    if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
+        absolute = [r for r in records if r.get("fit") == "supply_per_terminal"]
+        assert absolute and all(r["alpha"] == pytest.approx(1.5, abs=0.05) for r in absolute)
     if script.stem == "fidelity":
         (row,) = records
         assert row["n_terminals"] == 40 and row["n_orders"] == len(row["orders"]) >= 2
