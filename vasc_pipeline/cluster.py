@@ -20,7 +20,8 @@ import shutil
 from pathlib import Path
 from typing import Any, Iterator
 
-from .config import ClusterConfig, ConfigError
+from .config import ConfigError
+from .pipeline_config import ClusterConfig
 
 __all__ = [
     "check_cluster",
