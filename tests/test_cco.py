@@ -19,9 +19,10 @@ from vasc_pipeline import cco, config, engine, job, orchestrate, store, sweep
 from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.costs import full_costs
-from vasc_pipeline.geometry import best_topology, optimal_bifurcations, vascular_cost, vascular_weights
+from vasc_pipeline.geometry import optimal_bifurcations, vascular_cost, vascular_weights
 from vasc_pipeline.physics import cost_tables
 from vasc_pipeline.rng import seed_state
+from vasc_pipeline.topology_search import best_topology
 from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
 
 REPO = Path(__file__).resolve().parents[1]
@@ -212,7 +213,7 @@ def test_given_sites_in_file_order_and_in_random_order(tmp_path):
 
 @pytest.mark.parametrize("n, trials", [(4, 3), (5, 2), pytest.param(6, 2, marks=pytest.mark.slow)])  # 945 topologies
 def test_exhaustive_optimum_and_fixed_terminal_anneal_never_above_cco(n, trials, tmp_path):
-    """The exact optimum over every topology (geometry.best_topology) and the anneal (with its
+    """The exact optimum over every topology (topology_search.best_topology) and the anneal (with its
     single-swap descent) on the same 4-6 fixed terminals are never above CCO's C_v + C_w."""
     for trial in range(trials):
         sites = random_terminal_sites(

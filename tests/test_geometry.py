@@ -7,7 +7,7 @@ import pytest
 from helpers import assert_running_equals_full, make_problem
 from scipy.optimize import minimize
 
-from vasc_pipeline import engine, finish, geometry, kernel
+from vasc_pipeline import engine, finish, geometry, kernel, topology_search
 from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 # --------------------------------------------------------------------------------------
@@ -22,7 +22,7 @@ def _physics(n, ndim):
 def _random_topology(n, rng):
     """Parent array of a random rooted binary tree (inlet 0, terminals 1..n, bifurcations n+1..2n-1).
 
-    Built by joining random pairs of subtrees, independently of :func:`geometry.topologies`.
+    Built by joining random pairs of subtrees, independently of :func:`topology_search.topologies`.
     """
     parent = np.full(2 * n, -1, dtype=np.int64)
     roots = list(range(1, n + 1))
@@ -253,7 +253,7 @@ def test_a_2d_optimum_stays_in_its_plane_and_inside_the_bounds():
 @pytest.mark.parametrize("n, count", [(2, 1), (3, 3), (4, 15), (5, 105), (6, 945)])
 def test_topologies_are_every_rooted_binary_tree_once(n, count):
     seen = set()
-    for parent in geometry.topologies(n):
+    for parent in topology_search.topologies(n):
         assert parent[0] == -1 and np.all(parent[1:] >= 0)
         downstream = count_terminals(parent, n, 1)
         assert downstream[0] == n and np.all(downstream[1 : n + 1] == 1)
@@ -278,7 +278,7 @@ def test_best_topology_beats_random_topologies_and_matches_its_own_list():
     problem = make_problem("tissue=plane2d", "n_terminals=5")
     sites = np.c_[rng.uniform(0.01, 0.09, (5, 2)), np.zeros(5)]
     inlet = problem.tissue.inlets[0]
-    best, tree, each = geometry.best_topology(inlet, sites, problem.physics, problem.tissue.bounds)
+    best, tree, each = topology_search.best_topology(inlet, sites, problem.physics, problem.tissue.bounds)
     assert len(each) == 105 and best == min(each)
     assert geometry.vascular_cost(
         tree.position, tree.parent, geometry.vascular_weights(tree, problem.physics)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
 
-from vasc_pipeline import config, engine, geometry, job, kernel, sweep
+from vasc_pipeline import config, engine, job, kernel, sweep, topology_search
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.physics import cost_tables
 from vasc_pipeline.store import RunStore
@@ -229,7 +229,7 @@ def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
         "anneal.steps=1000000",
     ]
     problem = make_problem(*overrides)
-    best, _, _ = geometry.best_topology(problem.tissue.inlets[0], sites, problem.physics, problem.tissue.bounds)
+    best, _, _ = topology_search.best_topology(problem.tissue.inlets[0], sites, problem.physics, problem.tissue.bounds)
     for seed in range(4):
         result = engine.run(config.compose(overrides), seed=seed)
         c = result.costs_recomputed

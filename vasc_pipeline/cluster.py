@@ -20,7 +20,8 @@ import shutil
 from pathlib import Path
 from typing import Any, Iterator
 
-from .config import ClusterConfig, ConfigError
+from .config import ConfigError
+from .pipeline_config import ClusterConfig
 
 __all__ = [
     "check_cluster",
@@ -174,6 +175,7 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
     security = _security(cluster, server=True)
     if security is None and not cluster.allow_insecure:
         security = Security.temporary()  # the scheduler listens beyond loopback: never in clear by default
+    # One keyword per cluster.slurm key: the config uses dask-jobqueue's own names.
     cl = SLURMCluster(
         queue=s.queue,
         account=s.account,

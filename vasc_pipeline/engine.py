@@ -121,6 +121,7 @@ def build_problem(config: Any) -> Problem:
             f"tissue.inlet_share lists {len(share)} fractions; tissue {tissue.name!r} has {k} inlets ({names})"
         )
     p = cfg.physics
+    # Field by field: the config's physics as given, plus what the problem fixes (N, K, R_supply).
     physics = Physics(
         n_terminals=n,
         n_inlets=k,

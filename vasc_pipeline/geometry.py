@@ -1,4 +1,4 @@
-"""Optimal bifurcation positions for a fixed topology, and the exhaustive topology search.
+"""Optimal bifurcation positions for a fixed topology (a weighted Steiner problem).
 
 For a fixed topology the radii and flows are fixed (they depend on the downstream terminal
 counts only), so the vascular cost is a weighted sum of segment lengths,
@@ -22,9 +22,9 @@ subgradient condition). Violated segments are reopened and Newton resumes; segme
 Newton drives to zero length are contracted. The Newton systems are tree-structured and
 are factorised in children-first order, which creates no fill-in, so each is O(N).
 
-:mod:`vasc_pipeline.finish` applies the optimum to an annealed state (the polish).
-:func:`best_topology` enumerates every topology of a small
-fixed-terminal instance for the global optimum that tests and benchmarks compare against.
+:mod:`vasc_pipeline.finish` applies the optimum to an annealed state (the polish);
+:mod:`vasc_pipeline.topology_search` applies it to every topology of a small
+fixed-terminal instance for the global optimum that the tests compare against.
 """
 
 from __future__ import annotations
@@ -37,15 +37,13 @@ import scipy.sparse.linalg as spla
 
 from .physics import Physics, cost_tables
 from .topology import node_depth, segment_lengths
-from .tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
+from .tree import KIND_BIFURCATION, Tree
 
 __all__ = [
     "BifurcationOptimum",
     "vascular_weights",
     "vascular_cost",
     "optimal_bifurcations",
-    "topologies",
-    "best_topology",
 ]
 
 
@@ -442,84 +440,3 @@ def _admissible(collapsed, parent, levels, depth, fixed):
         # Reopen the collapsed segments of over-fixed clusters nearest their tops first.
         cand = np.flatnonzero(bad & collapsed)
         collapsed[cand[np.argmin(depth[cand])]] = False
-
-
-# --------------------------------------------------------------------------------------
-# Exhaustive search on small instances
-
-
-def topologies(n_terminals: int):
-    """Yield the parent array (2n,) of every rooted binary tree on n labelled terminals.
-
-    Layout as :class:`~vasc_pipeline.tree.Tree` with one inlet: inlet 0, terminals 1..n,
-    bifurcations n+1..2n-1. Terminal k is inserted into every segment of each tree on the
-    first k - 1 terminals, giving (2n - 3)!! trees (15, 105, 945 for n = 4, 5, 6).
-    """
-    if n_terminals < 2:
-        raise ValueError(f"n_terminals must be >= 2, got {n_terminals}")
-    m = 2 * n_terminals
-
-    def grow(parent, k, next_bif):
-        if k > n_terminals:
-            yield parent.copy()
-            return
-        for seg in [i for i in range(1, m) if parent[i] >= 0]:
-            p = parent[seg]
-            parent[next_bif] = p
-            parent[seg] = next_bif
-            parent[k] = next_bif
-            yield from grow(parent, k + 1, next_bif + 1)
-            parent[seg] = p
-            parent[k] = -1
-            parent[next_bif] = -1
-
-    parent = np.full(m, -1, dtype=np.int64)
-    parent[1] = 0
-    yield from grow(parent, 2, n_terminals + 1)
-
-
-def best_topology(
-    inlet: np.ndarray, terminals: np.ndarray, physics: Physics, bounds: tuple[np.ndarray, np.ndarray] | None = None
-) -> tuple[float, Tree, list[float]]:
-    """The global minimum of C_v + C_w over every topology on fixed terminals, one inlet.
-
-    Parameters
-    ----------
-    inlet : float64 (3,) [m]
-    terminals : float64 (n, 3) [m]
-    physics : Physics
-        Gives the per-length weights (n_terminals must equal n, one inlet).
-
-    Returns
-    -------
-    (cost [W], optimal Tree, the optimal cost of every topology in enumeration order)
-    """
-    terminals = np.atleast_2d(np.asarray(terminals, dtype=np.float64))
-    n = len(terminals)
-    if physics.n_terminals != n or physics.n_inlets != 1:
-        raise ValueError(f"physics must describe {n} terminals and one inlet")
-    best, best_tree, costs = np.inf, None, []
-    for parent in topologies(n):
-        position = np.zeros((2 * n, 3))
-        position[0] = inlet
-        position[1 : n + 1] = terminals
-        tree = Tree(parent, children_from_parent(parent), position, count_terminals(parent, n, 1), 1)
-        _place_from_children(tree)
-        res = optimal_bifurcations(tree, vascular_weights(tree, physics), bounds)
-        costs.append(res.cost)
-        if res.cost < best:
-            best, best_tree = res.cost, Tree(tree.parent, tree.children, res.position, tree.n_downstream, 1)
-    return best, best_tree, costs
-
-
-def _place_from_children(tree: Tree) -> None:
-    """Start each bifurcation at the mean of its terminals (a point inside their hull)."""
-    k, n = tree.n_inlets, tree.n_terminals
-    sums = np.zeros((tree.n_nodes, 3))
-    for t in range(k, k + n):
-        node = tree.parent[t]
-        while node >= k + n:
-            sums[node] += tree.position[t]
-            node = tree.parent[node]
-    bif = np.arange(k + n, tree.n_nodes)
-    tree.position[bif] = sums[bif] / tree.n_downstream[bif, None]

@@ -1,8 +1,9 @@
 """Order-wise morphometry of a tree: diameter-defined Strahler orders, elements, statistics.
 
 Pure functions on the tree arrays of SPEC section 7 (NumPy only, no numba); the
-topology helpers live in :mod:`vasc_pipeline.topology` and the orders in
-:mod:`vasc_pipeline.ordering` (both re-exported here):
+topology helpers live in :mod:`vasc_pipeline.topology`, the orders in
+:mod:`vasc_pipeline.ordering` and the comparison with Kassab 1993 in
+:mod:`vasc_pipeline.reference` (all re-exported here):
 
 - ``parent``   int64 (node,)     parent node, -1 at inlets
 - ``position`` float64 (node, 3) metres
@@ -35,7 +36,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import pandas as pd
 import xarray as xr
 
 from .ordering import (
@@ -47,6 +47,7 @@ from .ordering import (
     shift_orders,
     strahler_orders,
 )
+from .reference import compare_with_kassab
 from .topology import (
     KIND_BIFURCATION,
     KIND_INLET,
@@ -64,7 +65,7 @@ from .topology import (
     topological_order,
 )
 
-__all__ = [  # the topology and ordering names stay importable from here (public API)
+__all__ = [  # the topology, ordering and reference names stay importable from here (public API)
     "KIND_INLET",
     "KIND_BIFURCATION",
     "KIND_TERMINAL",
@@ -437,99 +438,3 @@ def morphometry(
         "strahler: conventional Strahler",
     )
     return ds
-
-
-def compare_with_kassab(
-    ds: xr.Dataset,
-    artery: str,
-    *,
-    scheme: str = "diameter_defined",
-    level: str = "element",
-    reference: xr.Dataset | None = None,
-) -> pd.DataFrame:
-    """Model against Kassab 1993: mean diameter and length per order.
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        From :func:`morphometry` (orders shifted to 11), with or without the ``scheme``
-        dim.
-    artery : {"RCA", "LAD", "LCX"}
-    scheme : {"diameter_defined", "strahler"}
-        Used when ``ds`` has a ``scheme`` dim.
-    level : {"element", "segment"}
-    reference : xarray.Dataset, optional
-        Default :func:`vasc_pipeline.reference.kassab_dataset`.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Index ``order`` (union of model and Kassab orders). Columns ``model_diameter``,
-        ``kassab_diameter``, ``diameter_log10_ratio`` (log10 model/Kassab), the same for
-        ``length`` (metres), ``model_count``, ``kassab_count``. ``attrs`` hold
-        ``mean_abs_log10_ratio_diameter``, ``mean_abs_log10_ratio_length`` (over the
-        orders present in both, NaN if none), their mean ``mean_abs_log10_ratio``,
-        ``n_orders_compared``, ``artery``, ``scheme`` and ``level``.
-    """
-    if reference is None:
-        from .reference import kassab_dataset
-
-        reference = kassab_dataset()
-    if artery not in reference.artery.values:
-        raise ValueError(f"artery: {artery!r} is not one of {list(reference.artery.values)}")
-    if level not in ("element", "segment"):
-        raise ValueError(f"level: {level!r} is not 'element' or 'segment'")
-    if "scheme" in ds.dims:
-        if scheme not in ds.scheme.values:
-            raise ValueError(f"scheme: {scheme!r} is not one of {list(ds.scheme.values)}")
-        ds = ds.sel(scheme=scheme)
-    ref = reference.sel(artery=artery, level=level)
-    model = pd.DataFrame(
-        {
-            "model_diameter": ds[f"{level}_diameter_mean"].to_series(),
-            "model_length": ds[f"{level}_length_mean"].to_series(),
-            "model_count": ds[f"{level}_count"].to_series(),
-        }
-    )
-    model = model[model.model_count > 0]
-    kassab = pd.DataFrame(
-        {
-            "kassab_diameter": ref.D_mean.to_series(),
-            "kassab_length": ref.L_mean.to_series(),
-            "kassab_count": ref.D_n.to_series(),
-        }
-    )
-    kassab = kassab[kassab.kassab_count > 0]
-    table = model.join(kassab, how="outer").sort_index()
-    table.index = table.index.astype(np.int64)
-    table.index.name = "order"
-    table["model_count"] = table.model_count.fillna(0).astype(np.int64)
-    table["kassab_count"] = table.kassab_count.fillna(0).astype(np.int64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        table["diameter_log10_ratio"] = np.log10(table.model_diameter / table.kassab_diameter)
-        table["length_log10_ratio"] = np.log10(table.model_length / table.kassab_length)
-    table = table[
-        [
-            "model_diameter",
-            "kassab_diameter",
-            "diameter_log10_ratio",
-            "model_length",
-            "kassab_length",
-            "length_log10_ratio",
-            "model_count",
-            "kassab_count",
-        ]
-    ]
-    both = (table.model_count > 0) & (table.kassab_count > 0)
-    mad = float(table.diameter_log10_ratio[both].abs().mean()) if both.any() else float("nan")
-    mal = float(table.length_log10_ratio[both].abs().mean()) if both.any() else float("nan")
-    table.attrs.update(
-        mean_abs_log10_ratio_diameter=mad,
-        mean_abs_log10_ratio_length=mal,
-        mean_abs_log10_ratio=(mad + mal) / 2,
-        n_orders_compared=int(both.sum()),
-        artery=artery,
-        scheme=scheme,
-        level=level,
-    )
-    return table

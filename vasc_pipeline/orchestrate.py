@@ -1,4 +1,4 @@
-"""Run a sweep: the output_dir lock, the Dask fan-out of its jobs, the sweep loop and the exit status.
+"""Run a sweep: the Dask fan-out of its jobs, the sweep loop and the exit status.
 
 :func:`main` is what ``python -m vasc_pipeline`` calls; :func:`run_sweep` is the plain
 function behind it (tests call it with a config from :func:`vasc_pipeline.config.compose`
@@ -6,10 +6,10 @@ and, optionally, a Dask client of their own). The path of a sweep:
 
 1. :func:`vasc_pipeline.planning.plan`: expand the grid, build one problem per distinct N
    so that tissue and tree errors surface before anything runs. No writes.
-2. :func:`output_dir_lock`: one sweep per output_dir at a time (an ``fcntl`` lock, released
-   by the kernel even on SIGKILL). Existing stores are checked against the requested config
-   (a changed config is refused, never mixed); stores of new runs are created here, before
-   any job is dispatched (:mod:`vasc_pipeline.planning`).
+2. :func:`vasc_pipeline.outdir.output_dir_lock`: one sweep per output_dir at a time (an
+   ``fcntl`` lock, released by the kernel even on SIGKILL). Existing stores are checked
+   against the requested config (a changed config is refused, never mixed); stores of new
+   runs are created here, before any job is dispatched (:mod:`vasc_pipeline.planning`).
 3. The numba kernels are compiled (or loaded from the on-disk cache) once in this process,
    so that workers load them instead of racing to compile (SPEC section 8).
 4. :func:`vasc_pipeline.cluster.open_client`: a LocalCluster (process workers, one thread
@@ -25,14 +25,11 @@ and, optionally, a Dask client of their own). The path of a sweep:
 from __future__ import annotations
 
 import contextlib
-import json
-import os
-import socket
 import sys
 import time
 import uuid
 from pathlib import Path
-from typing import Any, Iterator, TextIO
+from typing import Any, TextIO
 
 from . import config as _config
 from .cluster import (
@@ -45,12 +42,13 @@ from .cluster import (
     wait_for_workers,
 )
 from .config import ConfigError, RunConfig
+from .outdir import LOCK_NAME, OutputDirCallback, OutputDirLocked, check_output_dir, output_dir_lock
 from .planning import Plan, check_one_configuration, create_stores, inspect_stores, plan
 from .progress import PROGRESS_TOPIC, Progress, print_summary, runs_phrase
-from .store import RUNS_DIR, StoreError, file_lock
+from .store import RUNS_DIR, StoreError
 from .sweep import Job
 
-__all__ = [
+__all__ = [  # with the planning, cluster, progress and outdir names it uses (re-exported: public API)
     "main",
     "run_sweep",
     "reduce_stage",
@@ -71,111 +69,6 @@ __all__ = [
     "LOCK_NAME",
     "PROGRESS_TOPIC",
 ]
-
-LOCK_NAME = ".vasc_pipeline.lock"
-
-
-class OutputDirLocked(OSError):
-    """Another sweep holds the output_dir."""
-
-
-# --------------------------------------------------------------------------------------------
-# The output_dir lock
-
-
-@contextlib.contextmanager
-def output_dir_lock(output_dir: str | os.PathLike) -> Iterator[Path]:
-    """Hold ``<output_dir>/.vasc_pipeline.lock`` for the duration of a sweep.
-
-    Raises :class:`OutputDirLocked` (an OSError) if another sweep holds it, and OSError
-    naming ``output_dir`` if the directory cannot be created or written.
-    """
-    out = check_output_dir(output_dir)
-    with contextlib.ExitStack() as stack:
-        try:
-            (out / RUNS_DIR).mkdir(exist_ok=True)
-            fh = stack.enter_context(file_lock(out / LOCK_NAME, wait=False))
-        except BlockingIOError:
-            try:
-                holder = json.loads((out / LOCK_NAME).read_text() or "{}")
-            except (OSError, ValueError):
-                holder = {}
-            raise OutputDirLocked(
-                f"output_dir {str(out)!r} is in use by another sweep (pid {holder.get('pid', '?')} on "
-                f"{holder.get('host', '?')}, started {holder.get('started', '?')}). Two sweeps never write "
-                "into one output_dir at once: wait for that one to finish (or stop it; rerunning the same "
-                "command resumes it), or choose another output_dir=..."
-            ) from None
-        except OSError as exc:
-            raise OSError(
-                f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-                "writable directory with output_dir=..."
-            ) from exc
-        fh.seek(0)
-        fh.truncate()
-        fh.write(
-            json.dumps(
-                {
-                    "pid": os.getpid(),
-                    "host": socket.gethostname(),
-                    "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                    "argv": sys.argv,
-                }
-            )
-        )
-        fh.flush()
-        yield out
-
-
-def check_output_dir(output_dir: str | os.PathLike) -> Path:
-    """Create ``output_dir`` if needed and prove it writable; OSError naming the field otherwise."""
-    out = Path(output_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".write-test-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise OSError(
-            f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-            "writable directory with output_dir=..."
-        ) from exc
-    return out
-
-
-class OutputDirCallback:
-    """Hydra callback (conf/config.yaml ``hydra.callbacks``): check output_dir before Hydra writes its logs there.
-
-    Hydra creates its run directory (under output_dir) before the task function runs, so an
-    unwritable output_dir would otherwise surface as a bare traceback from Hydra.
-    """
-
-    def on_run_start(self, config: Any, **kwargs: Any) -> None:
-        # An empty output_dir would put results in the working directory and Hydra's logs at the
-        # filesystem root; a reduction must not create the directory it was asked to read.
-        try:
-            if not str(config.output_dir or "").strip():
-                raise OSError("output_dir is empty: give the directory for the results with output_dir=...")
-            if config.get("stage") == "reduce":
-                if not (Path(config.output_dir) / RUNS_DIR).is_dir():
-                    raise OSError(
-                        f"output_dir {str(config.output_dir)!r} holds no runs/ directory: nothing to "
-                        "reduce. Give the output_dir of a sweep (output_dir=...)"
-                    )
-            else:
-                check_output_dir(config.output_dir)
-        except OSError as exc:
-            sys.stderr.write(f"vasc_pipeline: error: {exc}\nExisting results were left as they were.\n")
-            sys.exit(2)
-
-    # The rest of Hydra's callback interface: nothing to do.
-    def on_run_end(self, config: Any, **kwargs: Any) -> None: ...
-    def on_multirun_start(self, config: Any, **kwargs: Any) -> None: ...
-    def on_multirun_end(self, config: Any, **kwargs: Any) -> None: ...
-    def on_job_start(self, config: Any, **kwargs: Any) -> None: ...
-    def on_job_end(self, config: Any, job_return: Any, **kwargs: Any) -> None: ...
-    def on_compose_config(self, config: Any, config_name: Any, overrides: Any) -> None: ...
-
 
 # --------------------------------------------------------------------------------------------
 # Compilation and the Dask task

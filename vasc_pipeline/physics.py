@@ -102,6 +102,7 @@ class CostTables:
 
     array: np.ndarray  # float64 (5, N + 1), rows TABLE_*
 
+    # One named view per row (the kernel takes the whole array): alike on purpose.
     @property
     def volume(self) -> np.ndarray:
         return self.array[TABLE_VOLUME]

@@ -6,7 +6,8 @@ the paper, their agreement in the ``status`` column). In the CSV, diameters are 
 micrometres and lengths in millimetres; :func:`kassab_dataset` converts both to metres.
 
 Orders are Kassab's diameter-defined Strahler orders: 1 = smallest arterioles, 11 = the
-trunk of the RCA and the LAD (the LCX has 10 orders).
+trunk of the RCA and the LAD (the LCX has 10 orders). :func:`compare_with_kassab` sets a
+model's per-order means (from :func:`vasc_pipeline.morphometry.morphometry`) beside them.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ __all__ = [
     "kassab_source",
     "kassab_table",
     "kassab_dataset",
+    "compare_with_kassab",
 ]
 
 KASSAB_CSV_NAME = "kassab1993_tables1-3_diameter_length.csv"
@@ -159,3 +161,97 @@ def kassab_dataset() -> xr.Dataset:
         coords=coords,
         attrs={"title": "Kassab et al. 1993, porcine coronary arteries, Tables 1-3", "source": source},
     )
+
+
+def compare_with_kassab(
+    ds: xr.Dataset,
+    artery: str,
+    *,
+    scheme: str = "diameter_defined",
+    level: str = "element",
+    reference: xr.Dataset | None = None,
+) -> pd.DataFrame:
+    """Model against Kassab 1993: mean diameter and length per order.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        From :func:`vasc_pipeline.morphometry.morphometry` (orders shifted to 11), with or
+        without the ``scheme`` dim.
+    artery : {"RCA", "LAD", "LCX"}
+    scheme : {"diameter_defined", "strahler"}
+        Used when ``ds`` has a ``scheme`` dim.
+    level : {"element", "segment"}
+    reference : xarray.Dataset, optional
+        Default :func:`kassab_dataset`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index ``order`` (union of model and Kassab orders). Columns ``model_diameter``,
+        ``kassab_diameter``, ``diameter_log10_ratio`` (log10 model/Kassab), the same for
+        ``length`` (metres), ``model_count``, ``kassab_count``. ``attrs`` hold
+        ``mean_abs_log10_ratio_diameter``, ``mean_abs_log10_ratio_length`` (over the
+        orders present in both, NaN if none), their mean ``mean_abs_log10_ratio``,
+        ``n_orders_compared``, ``artery``, ``scheme`` and ``level``.
+    """
+    if reference is None:
+        reference = kassab_dataset()
+    if artery not in reference.artery.values:
+        raise ValueError(f"artery: {artery!r} is not one of {list(reference.artery.values)}")
+    if level not in ("element", "segment"):
+        raise ValueError(f"level: {level!r} is not 'element' or 'segment'")
+    if "scheme" in ds.dims:
+        if scheme not in ds.scheme.values:
+            raise ValueError(f"scheme: {scheme!r} is not one of {list(ds.scheme.values)}")
+        ds = ds.sel(scheme=scheme)
+    ref = reference.sel(artery=artery, level=level)
+    model = pd.DataFrame(
+        {
+            "model_diameter": ds[f"{level}_diameter_mean"].to_series(),
+            "model_length": ds[f"{level}_length_mean"].to_series(),
+            "model_count": ds[f"{level}_count"].to_series(),
+        }
+    )
+    model = model[model.model_count > 0]
+    kassab = pd.DataFrame(
+        {
+            "kassab_diameter": ref.D_mean.to_series(),
+            "kassab_length": ref.L_mean.to_series(),
+            "kassab_count": ref.D_n.to_series(),
+        }
+    )
+    kassab = kassab[kassab.kassab_count > 0]
+    table = model.join(kassab, how="outer").sort_index()
+    table.index = table.index.astype(np.int64)
+    table.index.name = "order"
+    table["model_count"] = table.model_count.fillna(0).astype(np.int64)
+    table["kassab_count"] = table.kassab_count.fillna(0).astype(np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        table["diameter_log10_ratio"] = np.log10(table.model_diameter / table.kassab_diameter)
+        table["length_log10_ratio"] = np.log10(table.model_length / table.kassab_length)
+    table = table[
+        [
+            "model_diameter",
+            "kassab_diameter",
+            "diameter_log10_ratio",
+            "model_length",
+            "kassab_length",
+            "length_log10_ratio",
+            "model_count",
+            "kassab_count",
+        ]
+    ]
+    both = (table.model_count > 0) & (table.kassab_count > 0)
+    mad = float(table.diameter_log10_ratio[both].abs().mean()) if both.any() else float("nan")
+    mal = float(table.length_log10_ratio[both].abs().mean()) if both.any() else float("nan")
+    table.attrs.update(
+        mean_abs_log10_ratio_diameter=mad,
+        mean_abs_log10_ratio_length=mal,
+        mean_abs_log10_ratio=(mad + mal) / 2,
+        n_orders_compared=int(both.sum()),
+        artery=artery,
+        scheme=scheme,
+        level=level,
+    )
+    return table

@@ -21,6 +21,8 @@ TRUNK_FRACTION = 1.0 / 8.0  # the trunk ends where its larger branch carries les
 TRUNK_POINTS = 64  # points per resampled trunk
 
 
+# Its Parameters block repeats topology.py's for the tree arrays on purpose: numpydoc documents
+# them at every public function that takes them.
 def main_trunks(parent, position, kind, fraction: float = TRUNK_FRACTION) -> list[np.ndarray]:
     """Per inlet (in node order), the main trunk's centre-line, float64 (M, 3).
 

@@ -115,6 +115,8 @@ def inlet_of(parent) -> np.ndarray:
     return _pointer_jump_root(link)
 
 
+# The numpydoc blocks here repeat one another (parent, the shapes returned) on purpose: each
+# public helper documents its own arguments.
 def children_of(parent) -> np.ndarray:
     """Child table of a tree.
 

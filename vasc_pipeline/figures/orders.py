@@ -59,41 +59,51 @@ def _kassab(ax, kassab: xr.Dataset, what: str, scale: float, orders) -> None:
         )
 
 
-def _model(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, label: str) -> None:
-    m = morph.sel(point).sel(scheme="diameter_defined")
-    mean, se = m[f"element_{what}_mean"].values, m[f"element_{what}_se"].values
+def _mean_se(
+    ax, ds: xr.Dataset, point: dict, name: str, scale: float, color, label: str, linewidth: float, elinewidth: float
+) -> None:
+    """``<name>_mean`` ± ``<name>_se`` (times ``scale``) against order: the diameter-defined orders at ``point``."""
+    d = ds.sel(point).sel(scheme="diameter_defined")
+    mean, se = d[f"{name}_mean"].values, d[f"{name}_se"].values
     ok = np.isfinite(mean)
     ax.errorbar(
-        m.order.values[ok],
+        d.order.values[ok],
         mean[ok] * scale,
         yerr=np.nan_to_num(se[ok] * scale),
         color=color,
         marker="o",
         markersize=3.5,
-        linewidth=1.4,
+        linewidth=linewidth,
         capsize=2,
-        elinewidth=0.9,
+        elinewidth=elinewidth,
         label=label,
     )
+
+
+def _model(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, label: str) -> None:
+    _mean_se(ax, morph, point, f"element_{what}", scale, color, label, linewidth=1.4, elinewidth=0.9)
 
 
 _WHAT = {"diameter": ("D", UM, "element diameter [µm]"), "length": ("L", MM, "element length [mm]")}
 
 
-def _every_n(summary: xr.DataTree, morph: xr.Dataset) -> tuple[dict, list[int]]:
-    """The reference cell without N (:func:`reference_point`) and the N values with a tree there."""
+def _every_n(summary: xr.DataTree) -> tuple[xr.Dataset, dict, list[int]]:
+    """The summary's ``/morphometry``, its reference cell without N and the N values with a tree there.
+
+    What the figures drawn for every N start from (:func:`reference_point`, :func:`n_values`).
+    """
+    morph = summary["morphometry"].to_dataset()
     point = reference_point(morph, cell_dims(summary), exclude=("n_terminals",))
-    return point, n_values(morph, point)
+    return morph, point, n_values(morph, point)
 
 
 @styled
 def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     """Element diameter and length against order with Kassab's RCA/LAD/LCX; largest N and every N."""
-    morph = summary["morphometry"].to_dataset()
-    kassab = summary["kassab"].to_dataset()
-    point, ns = _every_n(summary, morph)
+    morph, point, ns = _every_n(summary)
     if not ns:
         return None
+    kassab = summary["kassab"].to_dataset()
     orders = morph.order.values
     orders = orders[orders >= 1]
     ncols = 2 if len(ns) > 1 else 1
@@ -126,21 +136,7 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
 
 
 def _ratio(ax, asym: xr.Dataset, point: dict, which: str, color, label: str) -> None:
-    a = asym.sel(point).sel(scheme="diameter_defined")
-    mean, se = a[f"diameter_ratio_{which}_mean"].values, a[f"diameter_ratio_{which}_se"].values
-    ok = np.isfinite(mean)
-    ax.errorbar(
-        a.order.values[ok],
-        mean[ok],
-        yerr=np.nan_to_num(se[ok]),
-        color=color,
-        marker="o",
-        markersize=3.5,
-        linewidth=1.2,
-        capsize=2,
-        elinewidth=0.8,
-        label=label,
-    )
+    _mean_se(ax, asym, point, f"diameter_ratio_{which}", 1.0, color, label, linewidth=1.2, elinewidth=0.8)
 
 
 _RATIO_LABEL = {"small": ("smaller daughter", "D$_s$/D$_p$"), "large": ("larger daughter", "D$_l$/D$_p$")}
@@ -163,11 +159,10 @@ def _ratio_panels(axes, asym, points_labels, colors, orders) -> None:
 @styled
 def plot_asymmetry(summary: xr.DataTree, path) -> Path | None:
     """D_s/D_p and D_l/D_p against parent order for every N (m_b nearest 641.3)."""
-    asym = summary["asymmetry"].to_dataset()
-    morph = summary["morphometry"].to_dataset()
-    point, ns = _every_n(summary, morph)
+    _, point, ns = _every_n(summary)
     if not ns:
         return None
+    asym = summary["asymmetry"].to_dataset()
     counts = asym["bifurcation_count"].sel(point).sel(scheme="diameter_defined")
     orders = asym.order.values[(counts > 0).any("n_terminals").values]
     fig, axes = subplots(1, 2, figsize=(8.2, 3.4))
