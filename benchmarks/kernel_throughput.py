@@ -15,6 +15,10 @@ two measurements:
   barely annealed trees at low temperature, whose long segments cross deep tissue: no run
   visits them, and they are 1.5-3x slower than a run's.
 
+Times are the measuring thread's CPU time (the kernel runs in it, releasing the GIL), so
+other processes on the machine take their time slices without inflating the figures; they
+still share caches and memory bandwidth, so measure on a quiet machine when you can.
+
 Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--anneal fast] [--run-budget 0.1]
        python benchmarks/kernel_throughput.py --quick    # N = 20, a few thousand moves (seconds)
 """
@@ -35,9 +39,9 @@ def trajectory_rates(problem, total_steps: int, pieces: int = 3) -> list[float]:
     bounds = [round(total_steps * k / pieces) for k in range(pieces + 1)]
     rates = []
     for lo, hi in zip(bounds[:-1], bounds[1:]):
-        t = time.perf_counter()
+        t = time.thread_time()
         engine.run_block(problem, state, hi - lo)
-        rates.append((hi - lo) / (time.perf_counter() - t))
+        rates.append((hi - lo) / (time.thread_time() - t))
     return rates
 
 
@@ -50,9 +54,9 @@ def phase_rates(problem, moves: int, warmup: int) -> dict[str, float]:
     for phase, frac in (("start", 0.0), ("middle", 0.5), ("end", 1.0)):
         state.counters[kernel.COUNTER_STEP] = int(frac * total)
         engine.run_block(problem, state, warmup)
-        t = time.perf_counter()
+        t = time.thread_time()
         engine.run_block(problem, state, moves)
-        rates[phase] = moves / (time.perf_counter() - t)
+        rates[phase] = moves / (time.thread_time() - t)
     return rates
 
 
