@@ -1,4 +1,4 @@
-"""``tissue.inlet_share``: the terminals of every inlet fixed (issue 13: the free split can abandon an artery)."""
+"""``tissue.inlet_share`` and ``tissue.inlet_assignment``: which terminals each inlet feeds (issue 13)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from helpers import assert_running_equals_full, make_problem
 from vasc_pipeline import engine
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.topology import inlet_of
-from vasc_pipeline.tree import TreeError, inlet_counts
+from vasc_pipeline.tree import TreeError, inlet_counts, nearest_inlets
 
 
 def terminals_per_inlet(problem, state) -> list[int]:
@@ -55,3 +55,43 @@ def test_a_fixed_share_survives_the_anneal_and_a_free_one_moves(share, expected)
 def test_bad_shares_are_refused_naming_the_field(overrides, error, message):
     with pytest.raises(error, match=message):
         make_problem("n_terminals=20", *overrides)
+
+
+def test_nearest_inlets_by_distance_with_and_without_counts():
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0], [2.9, 0, 0]])
+    inlets = np.array([[0.0, 0, 0], [3, 0, 0]])
+    assert nearest_inlets(points, inlets).tolist() == [0, 0, 1, 1, 1]
+    assert nearest_inlets(points, inlets, np.array([4, 1])).tolist() == [0, 0, 0, 1, 0]  # the 4 least far from inlet 0
+    assert nearest_inlets(points, inlets, np.array([1, 4])).tolist() == [0, 1, 1, 1, 1]
+    far = np.array([[10.0, 0, 0]])  # nobody's nearest: it still feeds the point nearest to it
+    assert nearest_inlets(points, np.vstack([inlets, far])).tolist() == [0, 0, 1, 2, 1]
+
+
+@pytest.mark.parametrize("share", [None, "[0.62,0.38]"])
+def test_nearest_assignment_gives_each_inlet_its_side_of_the_heart(share):
+    overrides = [
+        "n_terminals=200",
+        "tissue.inlet_assignment=nearest",
+        *([f"tissue.inlet_share={share}"] if share else []),
+    ]
+    problem = make_problem(*overrides)
+    state = engine.initial_state(problem, 0)
+    k, n = problem.physics.n_inlets, problem.physics.n_terminals
+    owner = inlet_of(state.parent)[k : k + n]
+    pos = np.asarray(state.position)[k : k + n]
+    inlets = problem.tissue.inlets
+    if share:
+        assert np.bincount(owner, minlength=k).tolist() == inlet_counts([0.62, 0.38], n).tolist()
+    # every terminal of inlet 0 is at least as much nearer to inlet 0 (relative to inlet 1) as any of inlet 1's
+    margin = np.linalg.norm(pos - inlets[0], axis=1) - np.linalg.norm(pos - inlets[1], axis=1)
+    assert margin[owner == 0].max() <= margin[owner == 1].min()
+    # still a pure function of (config, seed); the random assignment draws a different tree
+    again = engine.initial_state(problem, 0)
+    np.testing.assert_array_equal(again.parent, state.parent)
+    random = engine.initial_state(make_problem(*[o for o in overrides if "assignment" not in o]), 0)
+    assert not np.array_equal(inlet_of(random.parent)[k : k + n], owner)
+
+
+def test_an_unknown_inlet_assignment_is_refused_naming_the_field():
+    with pytest.raises(ConfigError, match=r"tissue\.inlet_assignment must be one of random, nearest, got 'closest'"):
+        make_problem("n_terminals=20", "tissue.inlet_assignment=closest")

@@ -63,6 +63,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclusion_path": None,
     "tissue.exclusion_array": None,
     "tissue.inlet_share": None,
+    "tissue.inlet_assignment": "random",
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -71,6 +72,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
+INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
 
 
 class ConfigError(ValueError):
@@ -97,6 +99,9 @@ class TissueConfig:
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
+    # Which terminals of the initial tree each inlet feeds: "random" (SPEC section 2), or
+    # "nearest" (by distance to the inlets, keeping inlet_share's counts when it is set).
+    inlet_assignment: str = "random"
 
 
 @dataclass
@@ -264,6 +269,11 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    if cfg.tissue.inlet_assignment not in INLET_ASSIGNMENTS:
+        raise ConfigError(
+            f"tissue.inlet_assignment must be one of {', '.join(INLET_ASSIGNMENTS)}, "
+            f"got {cfg.tissue.inlet_assignment!r}"
+        )
     share = cfg.tissue.inlet_share
     if share is not None:
         if not share or any(not (s > 0) for s in share) or abs(sum(share) - 1.0) > 1e-6:

@@ -228,8 +228,9 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
 
         tree = grow_tree(problem, rng)[0]
     else:
+        t = problem.config.tissue
         tree = random_tree(
-            problem.tissue, problem.physics.n_terminals, rng, problem.sites, problem.config.tissue.inlet_share
+            problem.tissue, problem.physics.n_terminals, rng, problem.sites, t.inlet_share, t.inlet_assignment
         )
     anneal = problem.config.anneal
     m = tree.n_nodes

@@ -24,6 +24,7 @@ __all__ = [
     "node_kinds",
     "random_tree",
     "inlet_counts",
+    "nearest_inlets",
     "count_terminals",
     "check_tree",
     "load_terminal_sites",
@@ -116,6 +117,7 @@ def random_tree(
     state: np.ndarray,
     sites: np.ndarray | None = None,
     inlet_share: list[float] | None = None,
+    inlet_assignment: str = "random",
 ) -> Tree:
     """Random initial tree (SPEC section 2).
 
@@ -124,7 +126,8 @@ def random_tree(
     by repeatedly joining two random subtrees, each bifurcation placed at the mean of its
     children. All randomness comes from ``state`` (advanced in place). With
     ``inlet_share`` (one fraction per inlet) inlet k gets :func:`inlet_counts` terminals,
-    a random set of them.
+    a random set of them. ``inlet_assignment="nearest"`` assigns the terminals by distance
+    instead (:func:`nearest_inlets`, keeping those counts when ``inlet_share`` is given).
     """
     n_inlets = len(tissue.inlets)
     if n_terminals < max(2, n_inlets):
@@ -141,7 +144,10 @@ def random_tree(
         j = _rng.next_below(state, i + 1)
         order[i], order[j] = order[j], order[i]
     inlet_of = np.empty(n_terminals, dtype=np.int64)
-    if inlet_share is not None:
+    if inlet_assignment == "nearest":
+        counts = None if inlet_share is None else inlet_counts(inlet_share, n_terminals)
+        inlet_of[:] = nearest_inlets(position[terminals], position[:n_inlets], counts)
+    elif inlet_share is not None:
         inlet_of[order - n_inlets] = np.repeat(np.arange(n_inlets), inlet_counts(inlet_share, n_terminals))
     else:
         inlet_of[order[:n_inlets] - n_inlets] = np.arange(n_inlets)
@@ -162,6 +168,35 @@ def random_tree(
         parent[roots[0]] = k
     children = children_from_parent(parent)
     return Tree(parent, children, position, count_terminals(parent, n_terminals, n_inlets), n_inlets)
+
+
+def nearest_inlets(points: np.ndarray, inlets: np.ndarray, counts: np.ndarray | None = None) -> np.ndarray:
+    """Inlet index of every point, by distance: its nearest inlet, or with ``counts`` exactly
+    ``counts[k]`` points for inlet k.
+
+    With counts, inlet k (in order) takes, among the points not yet taken, the ``counts[k]``
+    whose distance to inlet k exceeds their distance to the nearest later inlet the least
+    (for two inlets: the points split by a hyperboloid between them). Without counts, an
+    inlet that is nobody's nearest takes its nearest point, so that every inlet feeds one.
+    Deterministic: ties go to the lower point index.
+    """
+    dist = np.linalg.norm(points[:, None, :] - inlets[None, :, :], axis=2)
+    n_inlets = len(inlets)
+    if counts is None:
+        owner = np.argmin(dist, axis=1)
+        for k in range(n_inlets):
+            if not np.any(owner == k):
+                shared = np.flatnonzero(np.bincount(owner, minlength=n_inlets)[owner] > 1)
+                owner[shared[np.argmin(dist[shared, k])]] = k
+        return owner
+    owner = np.full(len(points), n_inlets - 1, dtype=np.int64)
+    free = np.arange(len(points))
+    for k in range(n_inlets - 1):
+        margin = dist[free, k] - dist[free][:, k + 1 :].min(axis=1)
+        take = free[np.argsort(margin, kind="stable")[: counts[k]]]
+        owner[take] = k
+        free = np.setdiff1d(free, take)
+    return owner
 
 
 def inlet_counts(inlet_share, n_terminals: int) -> np.ndarray:
