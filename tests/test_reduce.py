@@ -96,6 +96,14 @@ def test_trunk_spread_measures_how_alike_the_seeds_trees_are(swept, summary):
         pairs = [trunk_distance(a, b) for a, b in itertools.combinations(trunks, 2)]
         value = float(spread.sel(n_terminals=n, m_b=m_b))
         assert value == pytest.approx(np.mean(pairs), rel=1e-12) and value > 0
+    # the best tree's trunk: arc over chord, >= 1
+    tortuosity = summary["morphometry"]["trunk_tortuosity"]
+    best = store.RunStore.open(swept[2].best[(16, 641.3)].path, mode="r").read_tree()
+    (trunk,) = main_trunks(best["parent"], best["position"], best["kind"])
+    arc = np.sum(np.linalg.norm(np.diff(trunk, axis=0), axis=1))
+    expected = arc / np.linalg.norm(trunk[-1] - trunk[0])
+    assert float(tortuosity.sel(n_terminals=16, m_b=641.3)) == pytest.approx(expected, rel=1e-12)
+    assert (tortuosity >= 1).all()
 
 
 def test_morphometry_is_that_of_the_best_tree(swept, summary):
@@ -225,8 +233,9 @@ def test_figures_exist_and_are_not_blank(swept):
     assert not result.errors
     names = {p.name for p in result.figures}
     expected = {"morphometry_vs_kassab.png", "asymmetry.png", "mb_effect.png", "cost_traces.png"}
+    expected |= {"size_scan.png", "agreement_vs_n.png"}  # two N
     expected |= {f"tree_{r.run_id}.png" for r in result.best.values()}
-    assert names == expected  # no steps axis: no convergence figure
+    assert names == expected  # no steps axis: no convergence or consistency figure
     for p in result.figures:
         assert p.parent == out / "figures"
         _png_is_a_real_figure(p)
@@ -268,10 +277,23 @@ def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_pa
     costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
     assert costs.sizes["steps"] == 2 and costs.sizes["seed"] == 2
     assert costs.steps_done.sel(steps=30000).values.ravel().tolist() == [30000, 30000]
-    conv = tmp_path / "figures" / "convergence.png"
-    assert conv in result.figures
+    conv, consistency = tmp_path / "figures" / "convergence.png", tmp_path / "figures" / "consistency.png"
+    assert conv in result.figures and consistency in result.figures
     _png_is_a_real_figure(conv)
+    _png_is_a_real_figure(consistency)
+    spread = xr.open_zarr(tmp_path / "summary.zarr", group="morphometry")["trunk_spread"]
+    assert spread.notnull().all()  # the number printed on each row of consistency.png
     assert not (tmp_path / "figures" / "mb_effect.png").exists()  # a single m_b
+    assert not (tmp_path / "figures" / "size_scan.png").exists()  # a single N
+
+    # several sweeps' convergence on one plot, from the command line
+    cli = [sys.executable, "-m", "vasc_pipeline.figures", "convergence"]
+    both = tmp_path / "both.png"
+    done = subprocess.run([*cli, str(both), f"paper={tmp_path}", f"fast={tmp_path}"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    _png_is_a_real_figure(both)
+    bad = subprocess.run([*cli, str(both), f"x={tmp_path / 'nowhere'}"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "reduce the sweep first" in bad.stderr
 
 
 def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):

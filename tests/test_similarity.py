@@ -45,3 +45,11 @@ def test_trunk_distance_of_parallel_and_identical_lines():
 def test_trunk_spread_over_pairs_of_trees():
     trees = [main_trunks(*two_inlet_tree(shift), fraction=0.5) for shift in (0.0, 0.1, 0.3)]
     np.testing.assert_allclose(trunk_spread(trees), [0.1, 0.3, 0.2])
+
+
+def test_tortuosity_is_arc_over_chord():
+    from vasc_pipeline.similarity import tortuosity
+
+    assert tortuosity([[0, 0, 0], [1, 0, 0], [3, 0, 0]]) == pytest.approx(1.0)
+    assert tortuosity([[0, 0, 0], [1, 1, 0], [2, 0, 0]]) == pytest.approx(np.sqrt(2))
+    assert np.isnan(tortuosity([[1, 1, 1], [1, 1, 1]]))  # no chord

@@ -79,6 +79,8 @@ def test_each_study_script_wires_its_sweeps(tmp_path, script, expected):
     assert done.returncode == 0, done.stdout + done.stderr
     for name, run_ids in expected.items():
         assert_collected(tmp_path / "paper" / name, run_ids)
+    if script == "convergence.sh":  # both schedules on one plot
+        assert (tmp_path / "paper" / "convergence.png").stat().st_size > 20_000
 
 
 def test_cluster_argument():

@@ -1,5 +1,6 @@
 """How alike two trees are: their main trunks' centre-lines and the mean distance between them.
 
+Also the trunks' :func:`tortuosity` (the paper's "meandering trunks" at small m_b, a number).
 The paper's consistency claim ("trees become similar as steps grow, with a main diagonal
 artery") made a number: per inlet, the main trunk runs from the inlet down the child that
 carries more terminals, while that child still carries at least ``fraction`` of the inlet's
@@ -15,7 +16,15 @@ import numpy as np
 
 from .topology import terminals_downstream
 
-__all__ = ["TRUNK_FRACTION", "TRUNK_POINTS", "main_trunks", "resample_polyline", "trunk_distance", "trunk_spread"]
+__all__ = [
+    "TRUNK_FRACTION",
+    "TRUNK_POINTS",
+    "main_trunks",
+    "resample_polyline",
+    "trunk_distance",
+    "trunk_spread",
+    "tortuosity",
+]
 
 TRUNK_FRACTION = 1.0 / 8.0  # the trunk ends where its larger branch carries less of the inlet's terminals
 TRUNK_POINTS = 64  # points per resampled trunk
@@ -71,6 +80,18 @@ def resample_polyline(line, m: int = TRUNK_POINTS) -> np.ndarray:
         return np.repeat(line[:1], m, axis=0)
     t = np.linspace(0.0, s[-1], m)
     return np.stack([np.interp(t, s, line[:, c]) for c in range(line.shape[1])], axis=1)
+
+
+def tortuosity(line) -> float:
+    """Arc length over chord of a centre-line (1: straight; the paper's "meandering" trunks are > 1).
+
+    >>> tortuosity([[0, 0, 0], [1, 1, 0], [2, 0, 0]])
+    1.4142135623730951
+    """
+    line = np.asarray(line, dtype=float)
+    chord = float(np.linalg.norm(line[-1] - line[0]))
+    arc = float(np.sum(np.linalg.norm(np.diff(line, axis=0), axis=1)))
+    return arc / chord if chord > 0.0 else float("nan")
 
 
 def _distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:

@@ -11,8 +11,9 @@ anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
 
 - ``/morphometry``  (cell..., scheme, order): element and segment diameter/length mean, SD,
   SE and counts of the best tree; per cell ``best_seed``, ``best_run_id``, ``best_cost``,
-  ``n_seeds`` and ``trunk_spread`` (how alike the seeds' trees are: mean distance between
-  their main trunks, m).
+  ``n_seeds``, ``trunk_spread`` (how alike the seeds' trees are: mean distance between
+  their main trunks, m) and ``trunk_tortuosity`` (the best tree's main trunks, arc length
+  over chord).
 - ``/asymmetry``    (cell..., scheme, order): D_s/D_p and D_l/D_p by parent order, and
   ``symmetric_ratio`` = 2^(-1/gamma) per cell.
 - ``/costs``        (cell..., seed): final costs (annealed total and every unscaled term),
@@ -42,7 +43,7 @@ import xarray as xr
 from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
 from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
-from .similarity import main_trunks, trunk_spread
+from .similarity import main_trunks, tortuosity, trunk_spread
 from .store import TRACE_FIELDS, RunStore
 
 __all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
@@ -143,6 +144,12 @@ def _trunk_spread_of(cell_runs: list[RunInfo]) -> float:
         tree = RunStore.open(r.path, mode="r").read_tree()
         trunks.append(main_trunks(tree["parent"], tree["position"], tree["kind"]))
     return float(np.mean(trunk_spread(trunks)))
+
+
+def _trunk_tortuosity_of(run: RunInfo) -> float:
+    """Mean over the inlets of the main trunk's arc length over chord (:func:`similarity.tortuosity`)."""
+    tree = RunStore.open(run.path, mode="r").read_tree()
+    return float(np.mean([tortuosity(t) for t in main_trunks(tree["parent"], tree["position"], tree["kind"])]))
 
 
 _ASYMMETRY_VARS = (
@@ -270,6 +277,13 @@ def build_summary(
             )
             for k in best
         },
+        "trunk_tortuosity": _cell_var(
+            best,
+            _trunk_tortuosity_of,
+            np.float64,
+            "1",
+            "main trunk arc length over chord, mean over inlets, of the best tree (1: straight)",
+        ),
     }
     for name, values in extra.items():
         for key in best:

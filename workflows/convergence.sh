@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
 # The paper's convergence test: the 2-D plane, 64 terminals, 8 seeds, final cost against the
 # number of proposed moves (1e4 ... 1e9) for the paper's schedule and for anneal=fast, one
-# output directory each (a directory holds one configuration). Rerunning resumes.
+# output directory each (a directory holds one configuration), then both on one plot
+# ($PAPER_DIR/convergence.png). Rerunning resumes.
 source "$(dirname "$0")/_common.sh"
 STEPS="[10000,100000,1000000,10000000,100000000,1000000000]"
 for schedule in paper fast; do
     run_sweep "convergence_$schedule" +sweep=convergence "anneal=$schedule" "sweep.steps=$STEPS"
     collect "convergence_$schedule"
 done
+"$PYTHON" -m vasc_pipeline.figures convergence "$PAPER_DIR/convergence.png" \
+    "paper=$RUNS_DIR/convergence_paper" "fast=$RUNS_DIR/convergence_fast"

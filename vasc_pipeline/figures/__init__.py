@@ -17,6 +17,10 @@ Files (each only when the sweep has what it needs):
   every m_b at the largest N.
 - ``cost_traces.png``: annealed total cost against step, all seeds, one panel per cell.
 - ``convergence.png`` (a steps axis): mean final cost ± standard error against steps.
+- ``consistency.png`` (a steps axis, two or more seeds): the trees of up to four seeds at
+  every step count, each row with its ``trunk_spread`` (how far apart the seeds' main trunks are).
+- ``size_scan.png`` and ``agreement_vs_n.png`` (two or more N): diameter and length against
+  order, one column per N, with Kassab's arteries; mean |log10 model/Kassab| against N.
 - ``tree_<run_id>.png``: the best tree of every cell in projection, line width by radius,
   colour by inlet, tissue outline from the mask.
 
@@ -31,10 +35,11 @@ from pathlib import Path
 
 import xarray as xr
 
-from .costs import plot_convergence, plot_cost_traces
+from .costs import plot_convergence, plot_convergence_studies, plot_cost_traces
 from .orders import plot_asymmetry, plot_mb_effect, plot_morphometry
+from .sizes import plot_agreement, plot_size_scan
 from .style import REFERENCE_M_B, cell_dims, cell_points, cell_title
-from .trees import plot_tree
+from .trees import plot_consistency, plot_tree
 
 __all__ = [
     "make_figures",
@@ -43,6 +48,10 @@ __all__ = [
     "plot_mb_effect",
     "plot_cost_traces",
     "plot_convergence",
+    "plot_convergence_studies",
+    "plot_size_scan",
+    "plot_agreement",
+    "plot_consistency",
     "plot_tree",
     "REFERENCE_M_B",
 ]
@@ -70,10 +79,15 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
         (plot_mb_effect, "mb_effect.png"),
         (plot_cost_traces, "cost_traces.png"),
         (plot_convergence, "convergence.png"),
+        (plot_size_scan, "size_scan.png"),
+        (plot_agreement, "agreement_vs_n.png"),
     ):
         p = func(summary, out / name)
         if p is not None:
             paths.append(p)
+    p = plot_consistency(summary, output_dir, out / "consistency.png")
+    if p is not None:
+        paths.append(p)
     morph = summary["morphometry"].to_dataset()
     for point in cell_points(morph, cell_dims(summary)):
         run_id = str(morph["best_run_id"].sel(point).values)

@@ -1,13 +1,16 @@
 """Cost figures: the cost traces of every seed, and the convergence of the final cost with the step count.
 
 ``cost_traces.png`` (:func:`plot_cost_traces`, from the summary's ``/traces`` and ``/costs``)
-and ``convergence.png`` (:func:`plot_convergence`, a sweep with a steps axis).
+and ``convergence.png`` (:func:`plot_convergence`, a sweep with a steps axis);
+:func:`plot_convergence_studies` puts the convergence of several sweeps (say the paper's
+schedule and ``fast``, one output_dir each) on one plot.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Mapping
 
 import matplotlib.ticker
 import numpy as np
@@ -15,7 +18,7 @@ import xarray as xr
 
 from .style import cell_dims, cell_points, cell_title, palette, save, styled, subplots
 
-__all__ = ["plot_cost_traces", "plot_convergence"]
+__all__ = ["plot_cost_traces", "plot_convergence", "plot_convergence_studies"]
 
 
 @styled
@@ -79,46 +82,43 @@ def _sci(value: float) -> str:
     return f"${mant:.3g}{{\\times}}10^{{{exp}}}$"
 
 
-@styled
-def plot_convergence(summary: xr.DataTree, path) -> Path | None:
-    """Mean final cost ± standard error over seeds against the number of steps (the paper's appendix)."""
+def _convergence_series(summary: xr.DataTree, prefix: str = "") -> list[tuple[str, np.ndarray, list]]:
+    """(label, steps, [per panel: (n, mean, se) over seeds]) for every cell group without the steps axis."""
     costs = summary["costs"].to_dataset()
     dims = cell_dims(summary)
     if "steps" not in dims or costs.sizes["steps"] < 2:
-        return None
+        return []
     others = [d for d in dims if d != "steps"]
-    groups = cell_points(costs, others) if others else [{}]
-    fig, axes = subplots(1, 2, figsize=(8.2, 3.4))
-    colors = palette(len(groups), "tab10" if len(groups) <= 10 else "viridis")  # categories, not a scale
     steps = costs.steps.values.astype(float)
-    panels = (
-        (costs["cost_total"], f"final annealed total cost C [{costs['cost_total'].attrs.get('units', '')}]"),
-        (costs["cost_volume"] + costs["cost_power"], "final C$_v$ + C$_w$ [W]"),
-    )
-    drawn = False
-    for ax, (values, ylabel) in zip(axes, panels):
-        for point, c in zip(groups, colors):
+    series = []
+    for point in cell_points(costs, others) if others else [{}]:
+        panels = []
+        for values in (costs["cost_total"], costs["cost_volume"] + costs["cost_power"]):
             v = values.sel(point)
             n = v.notnull().sum("seed")
-            mean = v.mean("seed")
             se = v.std("seed", ddof=1) / np.sqrt(n.where(n > 0))
-            ok = (n > 0).values
+            panels.append((n.values, v.mean("seed").values, se.values))
+        label = cell_title({**point, "n_terminals": point.get("n_terminals", 0), "m_b": point.get("m_b", math.nan)})
+        series.append((f"{prefix}{label}", steps, panels))
+    return series
+
+
+def _draw_convergence(series, path, units: str, title: str) -> Path | None:
+    fig, axes = subplots(1, 2, figsize=(8.2, 3.4))
+    colors = palette(len(series), "tab10" if len(series) <= 10 else "viridis")  # categories, not a scale
+    ylabels = (f"final annealed total cost C [{units}]", "final C$_v$ + C$_w$ [W]")
+    drawn, all_steps = False, set()
+    for (label, steps, panels), c in zip(series, colors):
+        for ax, (n, mean, se) in zip(axes, panels):
+            ok = n > 0
             if not ok.any():
                 continue
             drawn = True
-            label = ", ".join(
-                p
-                for p in (
-                    cell_title(
-                        {**point, "n_terminals": point.get("n_terminals", 0), "m_b": point.get("m_b", math.nan)}
-                    ),
-                )
-                if p
-            )
+            all_steps.update(steps[ok].tolist())
             ax.errorbar(
                 steps[ok],
-                mean.values[ok],
-                yerr=np.nan_to_num(se.values[ok]),
+                mean[ok],
+                yerr=np.nan_to_num(se[ok]),
                 color=c,
                 marker="o",
                 markersize=4,
@@ -126,17 +126,43 @@ def plot_convergence(summary: xr.DataTree, path) -> Path | None:
                 linewidth=1.2,
                 label=f"{label} (n = {int(n.max())} seeds)",
             )
+    if not drawn:
+        return None
+    ticks = sorted(all_steps)
+    for ax, ylabel in zip(axes, ylabels):
         ax.set_xscale("log")
         # ticks at the sweep's step counts (minor log labels crowd, major ones may be absent)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xticks(steps, [_sci(v) for v in steps])
+        ax.set_xticks(ticks, [_sci(v) for v in ticks])
         ax.set_xlabel("proposed moves per run")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
-    if not drawn:
-        return None
-    fig.suptitle("Convergence: mean final cost ± standard error over seeds", fontsize=9)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(2, len(labels)))
     return save(fig, path)
+
+
+_CONVERGENCE_TITLE = "Convergence: mean final cost ± standard error over seeds"
+
+
+@styled
+def plot_convergence(summary: xr.DataTree, path) -> Path | None:
+    """Mean final cost ± standard error over seeds against the number of steps (the paper's appendix)."""
+    units = summary["costs"]["cost_total"].attrs.get("units", "")
+    return _draw_convergence(_convergence_series(summary), path, units, _CONVERGENCE_TITLE)
+
+
+@styled
+def plot_convergence_studies(summaries: Mapping[str, xr.DataTree], path) -> Path | None:
+    """:func:`plot_convergence` of several sweeps on one plot, e.g. ``{"paper": ..., "fast": ...}``.
+
+    Each sweep's cells are labelled with its key; the sweeps should share the tissue and N
+    (different schedules on one problem), or the costs are not comparable.
+    """
+    series = [s for label, summary in summaries.items() for s in _convergence_series(summary, f"{label}: ")]
+    if not series:
+        return None
+    units = next(iter(summaries.values()))["costs"]["cost_total"].attrs.get("units", "")
+    return _draw_convergence(series, path, units, _CONVERGENCE_TITLE + ", " + " vs ".join(summaries))

@@ -30,16 +30,16 @@ from .style import (
 
 __all__ = ["plot_morphometry", "plot_asymmetry", "plot_mb_effect"]
 
-_KASSAB_STYLE = {
+KASSAB_STYLE = {
     "RCA": dict(marker="o", color="0.15"),
     "LAD": dict(marker="s", color="0.45"),
     "LCX": dict(marker="^", color="0.65"),
 }
 
 
-def _kassab(ax, kassab: xr.Dataset, what: str, scale: float, orders) -> None:
+def kassab_points(ax, kassab: xr.Dataset, what: str, scale: float, orders) -> None:
     ref = kassab.sel(level="element")
-    for artery, style in _KASSAB_STYLE.items():
+    for artery, style in KASSAB_STYLE.items():
         r = ref.sel(artery=artery)
         mean, sd, n = r[f"{what}_mean"].values, r[f"{what}_sd"].values, r[f"{what}_n"].values
         ok = np.isfinite(mean) & np.isin(r.order.values, orders)
@@ -80,14 +80,14 @@ def _mean_se(
     )
 
 
-def _model(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, label: str) -> None:
+def model_points(ax, morph: xr.Dataset, point: dict, what: str, scale: float, color, label: str) -> None:
     _mean_se(ax, morph, point, f"element_{what}", scale, color, label, linewidth=1.4, elinewidth=0.9)
 
 
-_WHAT = {"diameter": ("D", UM, "element diameter [µm]"), "length": ("L", MM, "element length [mm]")}
+WHAT = {"diameter": ("D", UM, "element diameter [µm]"), "length": ("L", MM, "element length [mm]")}
 
 
-def _every_n(summary: xr.DataTree) -> tuple[xr.Dataset, dict, list[int]]:
+def every_n(summary: xr.DataTree) -> tuple[xr.Dataset, dict, list[int]]:
     """The summary's ``/morphometry``, its reference cell without N and the N values with a tree there.
 
     What the figures drawn for every N start from (:func:`reference_point`, :func:`n_values`).
@@ -100,7 +100,7 @@ def _every_n(summary: xr.DataTree) -> tuple[xr.Dataset, dict, list[int]]:
 @styled
 def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     """Element diameter and length against order with Kassab's RCA/LAD/LCX; largest N and every N."""
-    morph, point, ns = _every_n(summary)
+    morph, point, ns = every_n(summary)
     if not ns:
         return None
     kassab = summary["kassab"].to_dataset()
@@ -110,15 +110,15 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
     fig, axes = subplots(2, ncols, figsize=(3.6 * ncols + 0.4, 6.2), squeeze=False, sharex=True, sharey="row")
     colors = palette(len(ns))
     for row, what in enumerate(("diameter", "length")):
-        key, scale, ylabel = _WHAT[what]
+        key, scale, ylabel = WHAT[what]
         ax = axes[row, 0]
-        _kassab(ax, kassab, key, scale, orders)
-        _model(ax, morph, {**point, "n_terminals": ns[-1]}, what, scale, "C3", f"model, N = {ns[-1]}")
+        kassab_points(ax, kassab, key, scale, orders)
+        model_points(ax, morph, {**point, "n_terminals": ns[-1]}, what, scale, "C3", f"model, N = {ns[-1]}")
         if ncols == 2:
             ax2 = axes[row, 1]
-            _kassab(ax2, kassab, key, scale, orders)
+            kassab_points(ax2, kassab, key, scale, orders)
             for n, c in zip(ns, colors):
-                _model(ax2, morph, {**point, "n_terminals": n}, what, scale, c, f"model, N = {n}")
+                model_points(ax2, morph, {**point, "n_terminals": n}, what, scale, c, f"model, N = {n}")
         axes[row, 0].set_ylabel(ylabel)
         for a in axes[row]:
             a.set_yscale("log")
@@ -159,7 +159,7 @@ def _ratio_panels(axes, asym, points_labels, colors, orders) -> None:
 @styled
 def plot_asymmetry(summary: xr.DataTree, path) -> Path | None:
     """D_s/D_p and D_l/D_p against parent order for every N (m_b nearest 641.3)."""
-    _, point, ns = _every_n(summary)
+    _, point, ns = every_n(summary)
     if not ns:
         return None
     asym = summary["asymmetry"].to_dataset()
@@ -191,10 +191,10 @@ def plot_mb_effect(summary: xr.DataTree, path) -> Path | None:
     orders = morph.order.values[morph.order.values >= 1]
     fig, axes = subplots(2, 2, figsize=(8.2, 6.6))
     for ax, what in zip(axes[0], ("diameter", "length")):
-        key, scale, ylabel = _WHAT[what]
-        _kassab(ax, kassab, key, scale, orders)
+        key, scale, ylabel = WHAT[what]
+        kassab_points(ax, kassab, key, scale, orders)
         for m, c in zip(mbs, colors):
-            _model(ax, morph, {**base, "n_terminals": n, "m_b": m}, what, scale, c, mb_text(m))
+            model_points(ax, morph, {**base, "n_terminals": n, "m_b": m}, what, scale, c, mb_text(m))
         ax.set_yscale("log")
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
