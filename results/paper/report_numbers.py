@@ -1,0 +1,144 @@
+"""Print every number REPORT.md quotes, from the tracked outputs in results/paper/ (no run stores needed).
+
+    python results/paper/report_numbers.py            # from the repository root
+
+Each block names the file it reads. Diameters in µm, lengths in mm, errors in dex
+(|log10 model/Kassab|), as in the report.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+HERE = Path(__file__).resolve().parent
+SCHEME = "diameter_defined"
+
+
+def open_summary(study: str) -> xr.DataTree | None:
+    path = HERE / study / "summary.zarr"
+    return xr.open_datatree(path, engine="zarr") if path.is_dir() else None
+
+
+def size_scan(summary: xr.DataTree) -> None:
+    comp = summary["comparison"].to_dataset().squeeze("m_b", drop=True)
+    morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
+    costs = summary["costs"].to_dataset().squeeze("m_b", drop=True)
+    print("## size_scan: per N (comparison_summary.csv; summary.zarr /costs)")
+    print("N | seeds | wall per run [min] | best C_s | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | orders")
+    for n in comp.n_terminals.values:
+        c, m = comp.sel(n_terminals=n), morph.sel(n_terminals=n)
+        if not str(m["best_run_id"].values):
+            continue
+        wall = costs["wall_seconds"].sel(n_terminals=n).values
+        d = "/".join(f"{v:.3f}" for v in c["mean_abs_log10_ratio_diameter"].values)
+        ln = "/".join(f"{v:.3f}" for v in c["mean_abs_log10_ratio_length"].values)
+        orders = m.order.values[(m["element_count"].sel(scheme=SCHEME) > 0).values]
+        print(
+            f"{int(n)} | {int(m['n_seeds'])} | {np.nanmean(wall) / 60:.1f} | "
+            f"{float(costs['cost_supply'].sel(n_terminals=n).min()):.4g} | {d} | {ln} | "
+            f"{orders.min()}-{orders.max()}"
+        )
+    n = int(max(v for v in comp.n_terminals.values if str(morph["best_run_id"].sel(n_terminals=v).values)))
+    print(f"\n## size_scan: the largest tree, N = {n}, per order (comparison.csv), dex model/Kassab")
+    print(
+        "order | model D [um] | LAD D | dex D LAD | RCA | LCX | model L [mm] | LAD L | dex L LAD | RCA | LCX | elements"
+    )
+    c = comp.sel(n_terminals=n)
+    for order in c.order.values:
+        r = c.sel(order=order)
+        if int(r["model_count"].max()) == 0:
+            continue
+        lad = r.sel(artery="LAD")
+        print(
+            f"{int(order)} | {float(lad['model_diameter']) * 1e6:.0f} | {float(lad['kassab_diameter']) * 1e6:.0f} | "
+            + " | ".join(f"{float(r['diameter_log10_ratio'].sel(artery=a)):+.3f}" for a in ("LAD", "RCA", "LCX"))
+            + f" | {float(lad['model_length']) * 1e3:.2f} | {float(lad['kassab_length']) * 1e3:.2f} | "
+            + " | ".join(f"{float(r['length_log10_ratio'].sel(artery=a)):+.3f}" for a in ("LAD", "RCA", "LCX"))
+            + f" | {int(lad['model_count'])}"
+        )
+    asym = summary["asymmetry"].to_dataset().squeeze("m_b", drop=True).sel(scheme=SCHEME)
+    print("\n## size_scan: asymmetry by parent order (summary.zarr /asymmetry): D_s/D_p, D_l/D_p (bifurcations)")
+    for n in asym.n_terminals.values:
+        a = asym.sel(n_terminals=n)
+        ok = (a["bifurcation_count"] > 0).values
+        if not ok.any():
+            continue
+        cells = [
+            f"{int(o)}: {float(a['diameter_ratio_small_mean'].sel(order=o)):.2f}/"
+            f"{float(a['diameter_ratio_large_mean'].sel(order=o)):.2f} ({int(a['bifurcation_count'].sel(order=o))})"
+            for o in a.order.values[ok]
+        ]
+        print(f"N = {int(n)}: " + ", ".join(cells))
+    print(f"symmetric value 2^(-1/gamma) = {float(asym['symmetric_ratio'].max()):.3f}")
+
+
+def mb_scan(summary: xr.DataTree) -> None:
+    morph = summary["morphometry"].to_dataset().squeeze("n_terminals", drop=True).sel(scheme=SCHEME)
+    asym = summary["asymmetry"].to_dataset().squeeze("n_terminals", drop=True).sel(scheme=SCHEME)
+    print("\n## mb_scan (summary.zarr): per m_b, the best tree")
+    print(
+        "m_b | orders | L order 11/10/9 [mm] | D_l/D_p at parent orders 11/10/9 | trunk tortuosity | trunk spread [mm]"
+    )
+    for mb in morph.m_b.values:
+        m, a = morph.sel(m_b=mb), asym.sel(m_b=mb)
+        orders = m.order.values[(m["element_count"] > 0).values]
+        lengths = "/".join(f"{float(m['element_length_mean'].sel(order=o)) * 1e3:.1f}" for o in (11, 10, 9))
+        ratios = "/".join(f"{float(a['diameter_ratio_large_mean'].sel(order=o)):.2f}" for o in (11, 10, 9))
+        print(
+            f"{float(mb):.4g} | {len(orders)} ({orders.min()}-{orders.max()}) | {lengths} | {ratios} | "
+            f"{float(m['trunk_tortuosity']):.2f} | {float(m['trunk_spread']) * 1e3:.1f}"
+        )
+
+
+def convergence(summaries: dict[str, xr.DataTree]) -> None:
+    print("\n## convergence (summary.zarr /costs): mean final total cost ± SE over seeds")
+    for label, summary in summaries.items():
+        costs = summary["costs"].to_dataset().squeeze(["n_terminals", "m_b"], drop=True)
+        total = costs["cost_total"]
+        n = total.notnull().sum("seed")
+        mean, se = total.mean("seed"), total.std("seed", ddof=1) / np.sqrt(n)
+        wall = costs["wall_seconds"].sum().item()
+        cells = [
+            f"{s:.0e}: {float(mean.sel(steps=s)):.5g} ± {float(se.sel(steps=s)):.2g} (n={int(n.sel(steps=s))})"
+            for s in total.steps.values
+        ]
+        print(f"{label} (total run time {wall / 60:.1f} min): " + "; ".join(cells))
+
+
+def consistency(summary: xr.DataTree) -> None:
+    morph = summary["morphometry"].to_dataset().squeeze(["n_terminals", "m_b"], drop=True)
+    costs = summary["costs"].to_dataset().squeeze(["n_terminals", "m_b"], drop=True)
+    print("\n## consistency (summary.zarr /morphometry): trunk spread and tortuosity against moves")
+    for s in morph.steps.values:
+        wall = float(costs["wall_seconds"].sel(steps=s).sum())
+        print(
+            f"{s:.0e} moves: trunk spread {float(morph['trunk_spread'].sel(steps=s)) * 1e3:.1f} mm over "
+            f"{int(morph['n_seeds'].sel(steps=s))} seeds, best tree's trunk tortuosity "
+            f"{float(morph['trunk_tortuosity'].sel(steps=s)):.2f}, wall {wall / 60:.1f} min"
+        )
+
+
+def main() -> int:
+    found = False
+    if (s := open_summary("size_scan")) is not None:
+        size_scan(s)
+        found = True
+    if (s := open_summary("mb_scan")) is not None:
+        mb_scan(s)
+        found = True
+    conv = {k: s for k in ("paper", "fast") if (s := open_summary(f"convergence_{k}")) is not None}
+    if conv:
+        convergence(conv)
+        found = True
+    if (s := open_summary("consistency")) is not None:
+        consistency(s)
+        found = True
+    return 0 if found else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
