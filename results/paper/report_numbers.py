@@ -12,7 +12,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import xarray as xr
+
+from vasc_pipeline.morphometry import inlet_of
 
 HERE = Path(__file__).resolve().parent
 SCHEME = "diameter_defined"
@@ -23,12 +26,24 @@ def open_summary(study: str) -> xr.DataTree | None:
     return xr.open_datatree(path, engine="zarr") if path.is_dir() else None
 
 
+def inlet_shares(study: str, run_id: str) -> str:
+    """Share of the best tree's terminals fed by each inlet, from its exported CSV (trees/<run_id>.csv)."""
+    table = pd.read_csv(HERE / study / "trees" / f"{run_id}.csv")
+    parent = table["parent"].fillna(-1).to_numpy(dtype=np.int64)
+    inlet = inlet_of(parent)
+    terminal = table["kind"].to_numpy() == 2
+    return "/".join(f"{np.mean(inlet[terminal] == i):.2f}" for i in np.flatnonzero(parent < 0))
+
+
 def size_scan(summary: xr.DataTree) -> None:
     comp = summary["comparison"].to_dataset().squeeze("m_b", drop=True)
     morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
     costs = summary["costs"].to_dataset().squeeze("m_b", drop=True)
     print("## size_scan: per N (comparison_summary.csv; summary.zarr /costs)")
-    print("N | seeds | wall per run [min] | best C_s | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | orders")
+    print(
+        "N | seeds | wall per run [min] | best C_s | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | orders | "
+        "terminal share LCA/RCA"
+    )
     for n in comp.n_terminals.values:
         c, m = comp.sel(n_terminals=n), morph.sel(n_terminals=n)
         if not str(m["best_run_id"].values):
@@ -40,7 +55,7 @@ def size_scan(summary: xr.DataTree) -> None:
         print(
             f"{int(n)} | {int(m['n_seeds'])} | {np.nanmean(wall) / 60:.1f} | "
             f"{float(costs['cost_supply'].sel(n_terminals=n).min()):.4g} | {d} | {ln} | "
-            f"{orders.min()}-{orders.max()}"
+            f"{orders.min()}-{orders.max()} | {inlet_shares('size_scan', str(m['best_run_id'].values))}"
         )
     n = int(max(v for v in comp.n_terminals.values if str(morph["best_run_id"].sel(n_terminals=v).values)))
     print(f"\n## size_scan: the largest tree, N = {n}, per order (comparison.csv), dex model/Kassab")
@@ -81,16 +96,21 @@ def mb_scan(summary: xr.DataTree) -> None:
     asym = summary["asymmetry"].to_dataset().squeeze("n_terminals", drop=True).sel(scheme=SCHEME)
     print("\n## mb_scan (summary.zarr): per m_b, the best tree")
     print(
-        "m_b | orders | L order 11/10/9 [mm] | D_l/D_p at parent orders 11/10/9 | trunk tortuosity | trunk spread [mm]"
+        "m_b | orders | L order 11/10/9 [mm] | D_s/D_p, D_l/D_p at parent orders 11/10/9 | trunk tortuosity | "
+        "trunk spread [mm] | terminal share LCA/RCA"
     )
     for mb in morph.m_b.values:
         m, a = morph.sel(m_b=mb), asym.sel(m_b=mb)
         orders = m.order.values[(m["element_count"] > 0).values]
         lengths = "/".join(f"{float(m['element_length_mean'].sel(order=o)) * 1e3:.1f}" for o in (11, 10, 9))
-        ratios = "/".join(f"{float(a['diameter_ratio_large_mean'].sel(order=o)):.2f}" for o in (11, 10, 9))
+        ratios = ", ".join(
+            "/".join(f"{float(a[f'diameter_ratio_{which}_mean'].sel(order=o)):.2f}" for o in (11, 10, 9))
+            for which in ("small", "large")
+        )
         print(
             f"{float(mb):.4g} | {len(orders)} ({orders.min()}-{orders.max()}) | {lengths} | {ratios} | "
-            f"{float(m['trunk_tortuosity']):.2f} | {float(m['trunk_spread']) * 1e3:.1f}"
+            f"{float(m['trunk_tortuosity']):.2f} | {float(m['trunk_spread']) * 1e3:.1f} | "
+            f"{inlet_shares('mb_scan', str(m['best_run_id'].values))}"
         )
 
 
