@@ -40,6 +40,8 @@ __all__ = [
 
 REFERENCE_M_B = 641.3  # W m^-3, the physiological value: the m_b shown when a figure shows one
 DPI = 200
+# Tree pictures: thousands of thin lines compress badly, and results/paper tracks one per cell.
+TREE_DPI = 120
 UM, MM = 1e6, 1e3  # plot units of Kassab's tables: diameters in um, lengths in mm (the data stay SI)
 
 # Our figures' style, applied inside each plotting function only (rc_context): importing the
@@ -69,11 +71,11 @@ def subplots(nrows: int = 1, ncols: int = 1, *, figsize, **kwargs):
     return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
-def save(fig, path) -> Path:
+def save(fig, path, dpi: int = DPI) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
-    fig.savefig(tmp, dpi=DPI)
+    fig.savefig(tmp, dpi=dpi)
     os.replace(tmp, path)
     return path
 

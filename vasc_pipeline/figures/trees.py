@@ -15,7 +15,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
-from .style import MM, save, styled, subplots
+from .style import MM, TREE_DPI, save, styled, subplots
 
 __all__ = ["plot_tree", "plot_consistency", "load_tree", "draw_tree", "tree_views", "tree_legend"]
 
@@ -140,7 +140,7 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
         fontsize=7,
     )
     fig.tight_layout()
-    return save(fig, path)
+    return save(fig, path, dpi=TREE_DPI)
 
 
 @styled
@@ -183,4 +183,4 @@ def plot_consistency(summary, output_dir, path, max_seeds: int = 4) -> Path | No
         axes[row, 0].set_ylabel(f"{float(n_steps):.0e} moves\ntrunk spread {mm:.3g} mm", fontsize=8)
     fig.suptitle("Consistency: trees of different seeds as the moves grow (x-y projection)", fontsize=9)
     fig.tight_layout()
-    return save(fig, path)
+    return save(fig, path, dpi=TREE_DPI)
