@@ -127,6 +127,11 @@ def convergence(summaries: dict[str, xr.DataTree]) -> None:
             for s in total.steps.values
         ]
         print(f"{label} (total run time {wall / 60:.1f} min): " + "; ".join(cells))
+        spread = summary["morphometry"].to_dataset().squeeze(["n_terminals", "m_b"], drop=True)["trunk_spread"]
+        print(
+            f"{label} trunk spread [mm]: "
+            + ", ".join(f"{s:.0e}: {float(v) * 1e3:.1f}" for s, v in zip(spread.steps.values, spread.values))
+        )
 
 
 def consistency(summary: xr.DataTree) -> None:
