@@ -135,21 +135,16 @@ def _morphometry_of(run: RunInfo) -> xr.Dataset:
     return _m.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
 
 
-def _trunk_spread_of(cell_runs: list[RunInfo]) -> float:
-    """Mean over pairs of seeds of the trunk distance (:mod:`vasc_pipeline.similarity`); NaN for one seed."""
-    if len(cell_runs) < 2:
-        return float("nan")
-    trunks = []
-    for r in cell_runs:
-        tree = RunStore.open(r.path, mode="r").read_tree()
-        trunks.append(main_trunks(tree["parent"], tree["position"], tree["kind"]))
-    return float(np.mean(trunk_spread(trunks)))
-
-
-def _trunk_tortuosity_of(run: RunInfo) -> float:
-    """Mean over the inlets of the main trunk's arc length over chord (:func:`similarity.tortuosity`)."""
+def _main_trunks_of(run: RunInfo) -> list[np.ndarray]:
     tree = RunStore.open(run.path, mode="r").read_tree()
-    return float(np.mean([tortuosity(t) for t in main_trunks(tree["parent"], tree["position"], tree["kind"])]))
+    return main_trunks(tree["parent"], tree["position"], tree["kind"])
+
+
+def _trunk_spread_of(cell_trunks: list[list[np.ndarray]]) -> float:
+    """Mean over pairs of seeds of the trunk distance (:mod:`vasc_pipeline.similarity`); NaN for one seed."""
+    if len(cell_trunks) < 2:
+        return float("nan")
+    return float(np.mean(trunk_spread(cell_trunks)))
 
 
 _ASYMMETRY_VARS = (
@@ -252,6 +247,7 @@ def build_summary(
         comp, _ = _comparison_part(ds, reference, orders)
         comp_parts[key] = comp
     n_seeds = {k: sum(1 for r in runs if r.cell(dims) == k) for k in best}
+    trunks = {r.path: _main_trunks_of(r) for r in runs}  # read once: the spread and the tortuosity use them
     extra = {
         "best_seed": _cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
         "best_run_id": _cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
@@ -268,7 +264,7 @@ def build_summary(
         },
         "trunk_spread": {
             k: xr.DataArray(
-                _trunk_spread_of([r for r in runs if r.cell(dims) == k]),
+                _trunk_spread_of([trunks[r.path] for r in runs if r.cell(dims) == k]),
                 attrs={
                     "units": "m",
                     "long_name": "mean distance between the main trunks of two seeds, over pairs of seeds "
@@ -279,7 +275,7 @@ def build_summary(
         },
         "trunk_tortuosity": _cell_var(
             best,
-            _trunk_tortuosity_of,
+            lambda r: np.mean([tortuosity(t) for t in trunks[r.path]]),
             np.float64,
             "1",
             "main trunk arc length over chord, mean over inlets, of the best tree (1: straight)",

@@ -15,7 +15,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
-from .style import MM, TREE_DPI, save, styled, subplots
+from .style import MM, TREE_DPI, cell_dims, reference_point, save, styled, subplots
 
 __all__ = ["plot_tree", "plot_consistency", "load_tree", "draw_tree", "tree_views", "tree_legend"]
 
@@ -152,15 +152,13 @@ def plot_consistency(summary, output_dir, path, max_seeds: int = 4) -> Path | No
     Drawn for a sweep with a steps axis and two or more seeds; the x-y projection only.
     """
     from ..store import run_path
-    from .style import cell_dims, reference_point
 
     costs = summary["costs"].to_dataset()
     dims = cell_dims(summary)
     if "steps" not in dims or costs.sizes["steps"] < 2 or costs.sizes["seed"] < 2:
         return None
-    point = reference_point(costs, dims, exclude=("steps",))
-    if "n_terminals" in dims:
-        point["n_terminals"] = costs["n_terminals"].values.min()
+    # n_terminals is always a cell dim: the smallest N (a plane study has one)
+    point = {**reference_point(costs, dims, exclude=("steps",)), "n_terminals": costs["n_terminals"].values.min()}
     run_ids = costs["run_id"].sel(point)
     seeds = [s for s in costs.seed.values if all(str(r) for r in run_ids.sel(seed=s).values)][:max_seeds]
     if len(seeds) < 2:
