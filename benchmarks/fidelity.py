@@ -14,7 +14,9 @@ level):
 - the cost balance: C_v, C_w, the weighted exclusion (A_o/A_wv) C_o and the share of C_o
   carried by terminal segments, the mean pressure drop C_w / Q0 [Pa];
 - the inlet split: per inlet (LCA, RCA) root diameter and share of the terminals (flow);
-- ``cavity_share`` as stored, and ``n_contracted_segments``.
+- ``cavity_share`` as stored, and ``n_contracted_segments``;
+- where the branch points sit (:func:`placement_row`): the share of bifurcations outside the
+  exclusion domain, their median distance from it, the terminal segments' median length.
 
 One JSON line per run, then mean ± SE over seeds per (variant, budget, N):
 
@@ -104,6 +106,32 @@ def per_artery_trees(tree: dict, inlet_names) -> dict:
     return out
 
 
+def placement_row(tissue, tree: dict) -> dict:
+    """Where the branch points sit: the share of bifurcations outside the exclusion domain
+    (the heart and its cavities), their median distance from it, and the terminal segments'
+    median length, split by where their parent bifurcation sits."""
+    from scipy import ndimage
+
+    from vasc_pipeline.tree import KIND_BIFURCATION, KIND_TERMINAL
+
+    kind, position, parent = tree["kind"], tree["position"], tree["parent"]
+    distance_mm = ndimage.distance_transform_edt(tissue.exclusion == 0) * tissue.voxel_size * 1e3
+    idx = np.clip(tissue.voxel_index(position), 0, np.array(tissue.shape) - 1)
+    outside_mm = distance_mm[idx[:, 0], idx[:, 1], idx[:, 2]]
+    bifurcation, terminal = kind == KIND_BIFURCATION, kind == KIND_TERMINAL
+    out = outside_mm[bifurcation] > 0
+    hanging = terminal & (outside_mm[np.maximum(parent, 0)] > 0) & (kind[np.maximum(parent, 0)] == KIND_BIFURCATION)
+    length_mm = np.linalg.norm(position - position[np.maximum(parent, 0)], axis=1) * 1e3
+    return {
+        "bifurcations_outside_share": float(out.mean()),
+        "bifurcation_outside_distance_mm_median": float(np.median(outside_mm[bifurcation][out])) if out.any() else 0.0,
+        "terminal_segment_length_mm_median": float(np.median(length_mm[terminal])),
+        "terminal_segment_length_mm_median_parent_outside": (
+            float(np.median(length_mm[hanging])) if hanging.any() else float("nan")
+        ),
+    }
+
+
 def row_of(path: Path, root: Path) -> dict:
     from vasc_pipeline import config, engine, morphometry
     from vasc_pipeline.store import RunStore
@@ -132,6 +160,7 @@ def row_of(path: Path, root: Path) -> dict:
         "exclusion_share_terminal_segments": float(exclusion[kind == 2].sum() / max(exclusion.sum(), 1e-300)),
         "pressure_drop_mean_Pa": float(c["power"] / physics["total_flow"]),
     }
+    row.update(placement_row(tissue, tree))
     inlet_of = morphometry.inlet_of(parent)
     for name, inlet in zip(tissue.inlet_names, np.flatnonzero(parent < 0)):
         root_segment = np.flatnonzero(parent == inlet)[0]
@@ -169,6 +198,9 @@ SUMMARY = (
     "cost_exclusion_weighted",
     "exclusion_share_terminal_segments",
     "pressure_drop_mean_Pa",
+    "bifurcations_outside_share",
+    "bifurcation_outside_distance_mm_median",
+    "terminal_segment_length_mm_median",
 )
 
 
@@ -214,7 +246,10 @@ def print_table(table: list[dict]) -> None:
             f"    length {length} | per artery {length_separate}\n"
             f"    C_v {t['cost_volume']:.3g} W, C_w {t['cost_power']:.3g} W, (A_o/A_wv) C_o "
             f"{t['cost_exclusion_weighted']:.3g} W ({t['exclusion_share_terminal_segments']:.4f} on terminal "
-            f"segments), mean pressure drop {t['pressure_drop_mean_Pa'] / 1e3:.2f} kPa; {inlets}"
+            f"segments), mean pressure drop {t['pressure_drop_mean_Pa'] / 1e3:.2f} kPa; {inlets}\n"
+            f"    bifurcations outside the exclusion domain {_pm(t, 'bifurcations_outside_share', '.2f')} "
+            f"(median {_pm(t, 'bifurcation_outside_distance_mm_median', '.1f')} mm out), terminal segments "
+            f"{_pm(t, 'terminal_segment_length_mm_median', '.1f')} mm (median)"
         )
 
 

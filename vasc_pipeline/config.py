@@ -64,6 +64,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclusion_array": None,
     "tissue.inlet_share": None,
     "tissue.inlet_assignment": "random",
+    "tissue.bifurcation_reach": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -102,6 +103,9 @@ class TissueConfig:
     # Which terminals of the initial tree each inlet feeds: "random" (SPEC section 2), or
     # "nearest" (by distance to the inlets, keeping inlet_share's counts when it is set).
     inlet_assignment: str = "random"
+    # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
+    # heart); None: anywhere in the voxel grid's box (the paper's model).
+    bifurcation_reach: Optional[float] = None
 
 
 @dataclass
@@ -285,6 +289,15 @@ def validate(cfg: RunConfig) -> RunConfig:
             raise ConfigError(
                 "tissue.inlet_share fixes the terminals of every inlet, which the CCO growth (method=cco, "
                 "anneal.init=cco) assigns by connection: leave it unset (null) there"
+            )
+    reach = cfg.tissue.bifurcation_reach
+    if reach is not None:
+        if not (reach >= 0 and math.isfinite(reach)):
+            raise ConfigError(f"tissue.bifurcation_reach must be a length >= 0 in metres, or null, got {reach}")
+        if cfg.method.name == "cco":
+            raise ConfigError(
+                "tissue.bifurcation_reach confines the anneal's bifurcations; the CCO growth (method=cco) "
+                "places them at their optimum: leave it unset (null) there"
             )
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):

@@ -202,6 +202,11 @@ def build_problem(config: Any) -> Problem:
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
         early_reject=True,
         fixed_inlet_counts=cfg.tissue.inlet_share is not None,
+        bifurcation_region=(
+            np.zeros((0, 0, 0), dtype=np.uint8)
+            if cfg.tissue.bifurcation_reach is None
+            else tissue.bifurcation_region(cfg.tissue.bifurcation_reach)
+        ),
     )
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
 
@@ -232,6 +237,10 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
         tree = random_tree(
             problem.tissue, problem.physics.n_terminals, rng, problem.sites, t.inlet_share, t.inlet_assignment
         )
+    region = problem.model.bifurcation_region
+    if region.size:  # tissue.bifurcation_reach: the initial bifurcations (children's means) moved into it
+        bifurcations = slice(problem.model.n_inlets + problem.model.n_terminals, None)
+        tree.position[bifurcations] = problem.tissue.move_into(region, tree.position[bifurcations])
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = restore_state(

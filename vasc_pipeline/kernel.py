@@ -72,6 +72,8 @@ Model = namedtuple(
         "early_reject",  # skip the exclusion traversals when a lower bound of ΔC fails Metropolis
         # (same decisions and random stream either way; False only to test that)
         "fixed_inlet_counts",  # tissue.inlet_share: a swap between inlet trees must keep their terminal counts
+        "bifurcation_region",  # uint8 (nz, ny, nx): where a bifurcation may lie (tissue.bifurcation_reach);
+        # shape (0, 0, 0): anywhere in the grid's box
     ],
 )
 
@@ -330,14 +332,20 @@ def _voxel_coords(model, x, y, z):
 
 
 @jit_norc_inline
-def in_tissue(model, p):
-    """True when the point p [m] lies in a tissue voxel (where a terminal may be)."""
-    nz, ny, nx = model.mask.shape
+def _in_voxels(model, grid, p):
+    """True when the point p [m] lies in a nonzero voxel of ``grid`` (a uint8 map of the tissue's grid)."""
+    nz, ny, nx = grid.shape
     ux, uy, uz = _voxel_coords(model, p[0], p[1], p[2])
     ix = math.floor(ux + 0.5)
     iy = math.floor(uy + 0.5)
     iz = math.floor(uz + 0.5)
-    return 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz and model.mask[iz, iy, ix] != 0
+    return 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz and grid[iz, iy, ix] != 0
+
+
+@jit_norc_inline
+def in_tissue(model, p):
+    """True when the point p [m] lies in a tissue voxel (where a terminal may be)."""
+    return _in_voxels(model, model.mask, p)
 
 
 @jit_norc_inline
@@ -708,7 +716,7 @@ def _adapt_step(model, state, cls, accepted):
 def translate_node(model, state, i, new, temp):
     """Propose moving node i to ``new``; Metropolis at ``temp``. Returns ILLEGAL, REJECTED or ACCEPTED.
 
-    A terminal must land in tissue, a bifurcation inside the grid's box.
+    A terminal must land in tissue, a bifurcation inside the grid's box and its region.
     """
     return _translate_node(model, state, i, new, temp)
 
@@ -742,14 +750,15 @@ def _set_segment(state, x, length, exclusion):
 
 
 @jit_norc_inline
-def _legal_position(model, is_terminal, p):
-    """A terminal must lie in tissue, a bifurcation inside the grid's box."""
+def legal_position(model, is_terminal, p):
+    """A terminal must lie in tissue, a bifurcation inside the grid's box (and its
+    ``bifurcation_region`` when one is set)."""
     if is_terminal:
         return in_tissue(model, p)
     for a in range(3):
         if p[a] < model.box_lo[a] or p[a] > model.box_hi[a]:
             return False
-    return True
+    return model.bifurcation_region.shape[0] == 0 or _in_voxels(model, model.bifurcation_region, p)
 
 
 @jit_norc_inline
@@ -789,7 +798,7 @@ def _translate_node(model, state, i, new, temp):
     is_terminal = i < model.n_inlets + model.n_terminals
     cls = 0 if is_terminal else 1
     state.counters[MOVE_COUNTERS[cls, N_PROPOSED]] += 1
-    if not _legal_position(model, is_terminal, new):
+    if not legal_position(model, is_terminal, new):
         return ILLEGAL
     p = state.parent[i]
     c0 = state.children[i, 0]  # -1, -1 for a terminal

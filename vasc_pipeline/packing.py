@@ -8,9 +8,10 @@ exponentially from ``anneal.packing_T_start`` (in voxels of one supply sphere) t
 ``anneal.packing_T_end`` (C_s units). A packing move costs only the supply sphere's
 update: no segment, traversal or tree cache is touched, and those go stale while the
 terminals move. At step ``pack_steps`` (:func:`end_packing`) every bifurcation moves to
-the mean of its children, bottom-up, and the kernel's caches and running sums are rebuilt
-from the tree (:func:`vasc_pipeline.kernel.initialise`); the tree anneal then runs its own
-schedule over the remaining proposals (``Model.pack_steps`` is where it starts).
+the mean of its children, bottom-up (unless the mean is outside ``tissue.bifurcation_reach``:
+then it stays), and the kernel's caches and running sums are rebuilt from the tree
+(:func:`vasc_pipeline.kernel.initialise`); the tree anneal then runs its own schedule over
+the remaining proposals (``Model.pack_steps`` is where it starts).
 
 Everything lives in the kernel's ``State`` (positions, supply map, generator, counters,
 the terminal step width), so a packing phase split into blocks, checkpointed and resumed
@@ -76,7 +77,7 @@ def _pack_move(model, state, temp, new):
 
 @jit
 def end_packing(model, state):
-    """Bifurcations to the means of their children (bottom-up), then every cache rebuilt."""
+    """Bifurcations to the means of their children (bottom-up) where that is legal, then every cache rebuilt."""
     order = state.scratch_stack  # breadth-first from the inlets; reversed, children come first
     n = 0
     for r in range(model.n_inlets):
@@ -96,8 +97,9 @@ def end_packing(model, state):
         b = order[idx]
         if b >= first_bif:
             c0, c1 = state.children[b, 0], state.children[b, 1]
-            for a in range(3):
-                pos[b, a] = 0.5 * (pos[c0, a] + pos[c1, a])
+            mean = 0.5 * (pos[c0] + pos[c1])
+            if kernel.legal_position(model, False, mean):  # else it stays where it is (legal)
+                pos[b] = mean
     kernel.initialise(model, state)
 
 

@@ -199,14 +199,40 @@ class Tissue:
         u = (np.asarray(points, dtype=np.float64) - self.origin) / self.voxel_size
         return np.floor(u[..., ::-1] + 0.5).astype(np.int64)
 
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """True where a point lies in a tissue voxel."""
+    def contains(self, points: np.ndarray, region: np.ndarray | None = None) -> np.ndarray:
+        """True where a point lies in a tissue voxel (or a voxel of ``region``, same grid)."""
+        grid = self.mask if region is None else region
         idx = self.voxel_index(points)
-        inside = np.all((idx >= 0) & (idx < np.array(self.mask.shape)), axis=-1)
+        inside = np.all((idx >= 0) & (idx < np.array(grid.shape)), axis=-1)
         out = np.zeros(inside.shape, dtype=bool)
         sel = idx[inside]
-        out[inside] = self.mask[sel[:, 0], sel[:, 1], sel[:, 2]] == 1
+        out[inside] = grid[sel[:, 0], sel[:, 1], sel[:, 2]] != 0
         return out
+
+    def bifurcation_region(self, reach: float) -> np.ndarray:
+        """uint8 (nz, ny, nx): the voxels within ``reach`` [m] of the exclusion domain, the
+        domain included (``tissue.bifurcation_reach``: where a bifurcation may lie).
+
+        Distances are between voxel centres; ``reach`` = 0 is the exclusion domain itself.
+        """
+        distance_outside = ndimage.distance_transform_edt(self.exclusion == 0) * self.voxel_size
+        return (distance_outside <= reach).astype(np.uint8)
+
+    def move_into(self, region: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """``points`` (n, 3) [m], each outside ``region`` (a uint8 grid of this tissue) moved
+        to the centre of the nearest voxel of ``region``; the others unchanged."""
+        points = np.array(points, dtype=np.float64)
+        outside = ~self.contains(points, region)
+        if outside.any():
+            _, nearest = ndimage.distance_transform_edt(region == 0, return_indices=True)
+            idx = self.voxel_index(points[outside])
+            idx = np.clip(idx, 0, np.array(region.shape) - 1)
+            zyx = nearest[:, idx[:, 0], idx[:, 1], idx[:, 2]]  # (3, n)
+            moved = self.origin + zyx[::-1].T * self.voxel_size
+            if self.ndim == 2:
+                moved[:, 2] = points[outside, 2]
+            points[outside] = moved
+        return points
 
 
 def voxelize(
