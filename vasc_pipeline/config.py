@@ -104,7 +104,7 @@ class TissueConfig:
     # "nearest" (by distance to the inlets, keeping inlet_share's counts when it is set).
     inlet_assignment: str = "random"
     # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
-    # heart); None: anywhere in the voxel grid's box (the paper's model).
+    # heart); None: anywhere in the voxel grid's box (SPEC section 2).
     bifurcation_reach: Optional[float] = None
 
 
