@@ -109,19 +109,17 @@ def per_artery_trees(tree: dict, inlet_names) -> dict:
 def placement_row(tissue, tree: dict) -> dict:
     """Where the branch points sit: the share of bifurcations outside the exclusion domain
     (the heart and its cavities), their median distance from it, and the terminal segments'
-    median length, split by where their parent bifurcation sits."""
-    from scipy import ndimage
-
+    median length: all of them, and those hanging from a bifurcation outside."""
     from vasc_pipeline.tree import KIND_BIFURCATION, KIND_TERMINAL
 
     kind, position, parent = tree["kind"], tree["position"], tree["parent"]
-    distance_mm = ndimage.distance_transform_edt(tissue.exclusion == 0) * tissue.voxel_size * 1e3
+    up = np.maximum(parent, 0)  # parent -1 (inlets) maps to node 0; only rows of terminals are read
     idx = np.clip(tissue.voxel_index(position), 0, np.array(tissue.shape) - 1)
-    outside_mm = distance_mm[idx[:, 0], idx[:, 1], idx[:, 2]]
+    outside_mm = tissue.distance_outside()[idx[:, 0], idx[:, 1], idx[:, 2]] * 1e3
     bifurcation, terminal = kind == KIND_BIFURCATION, kind == KIND_TERMINAL
     out = outside_mm[bifurcation] > 0
-    hanging = terminal & (outside_mm[np.maximum(parent, 0)] > 0) & (kind[np.maximum(parent, 0)] == KIND_BIFURCATION)
-    length_mm = np.linalg.norm(position - position[np.maximum(parent, 0)], axis=1) * 1e3
+    hanging = terminal & (outside_mm[up] > 0) & (kind[up] == KIND_BIFURCATION)
+    length_mm = np.linalg.norm(position - position[up], axis=1) * 1e3
     return {
         "bifurcations_outside_share": float(out.mean()),
         "bifurcation_outside_distance_mm_median": float(np.median(outside_mm[bifurcation][out])) if out.any() else 0.0,

@@ -209,14 +209,18 @@ class Tissue:
         out[inside] = grid[sel[:, 0], sel[:, 1], sel[:, 2]] != 0
         return out
 
+    def distance_outside(self) -> np.ndarray:
+        """float (nz, ny, nx): distance [m] of each voxel centre to the nearest voxel of the
+        exclusion domain (0 inside it)."""
+        return ndimage.distance_transform_edt(self.exclusion == 0) * self.voxel_size
+
     def bifurcation_region(self, reach: float) -> np.ndarray:
         """uint8 (nz, ny, nx): the voxels within ``reach`` [m] of the exclusion domain, the
         domain included (``tissue.bifurcation_reach``: where a bifurcation may lie).
 
         Distances are between voxel centres; ``reach`` = 0 is the exclusion domain itself.
         """
-        distance_outside = ndimage.distance_transform_edt(self.exclusion == 0) * self.voxel_size
-        return (distance_outside <= reach).astype(np.uint8)
+        return (self.distance_outside() <= reach).astype(np.uint8)
 
     def move_into(self, region: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``points`` (n, 3) [m], each outside ``region`` (a uint8 grid of this tissue) moved
