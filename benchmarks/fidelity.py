@@ -8,6 +8,8 @@ level):
 - ``diameter_error_<artery>`` / ``length_error_<artery>``: mean |log10 model/Kassab| over the
   orders present in both, trunk = 11 (the reduction's alignment), and the same with the
   terminal order placed on Kassab's order of nearest diameter (``..._terminal_aligned_...``);
+- the same errors and ``n_orders`` under the confluence reading of the ordering
+  (``..._confluence_...``; :mod:`vasc_pipeline.ordering`: orders never decrease toward the root);
 - ``n_orders``, ``diameter_ratio_per_order`` (10^slope of log10 element diameter against
   order; Kassab's LAD, orders 5-11: 1.91) and per order the element count, segments per
   element, mean diameter and length (``orders``);
@@ -171,6 +173,14 @@ def row_of(path: Path, root: Path) -> dict:
     row["n_contracted_segments"] = int(morph.attrs["n_contracted_segments"])
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
     row.update(morphometry_row(morph))
+    # the other reading of Jiang's reassignment (vasc_pipeline.ordering): orders monotone toward the root
+    confluence = morphometry_row(
+        morphometry.morphometry(parent, tree["position"], tree["radius"], kind, reading="confluence")
+    )
+    row["n_orders_confluence"] = confluence["n_orders"]
+    for artery in ARTERIES:
+        for what in ("diameter", "length"):
+            row[f"{what}_error_confluence_{artery}"] = confluence[f"{what}_error_{artery}"]
     if {"LCA", "RCA"} <= set(tissue.inlet_names):
         for artery, sub in per_artery_trees(tree, tissue.inlet_names).items():
             top = int(KASSAB_TOP_ORDER[artery])
@@ -189,6 +199,9 @@ SUMMARY = (
     *(f"diameter_error_{a}" for a in ARTERIES),
     *(f"diameter_error_terminal_aligned_{a}" for a in ARTERIES),
     *(f"diameter_error_per_artery_{a}" for a in ARTERIES),
+    "n_orders_confluence",
+    *(f"diameter_error_confluence_{a}" for a in ARTERIES),
+    *(f"length_error_confluence_{a}" for a in ARTERIES),
     *(f"length_error_{a}" for a in ARTERIES),
     *(f"length_error_per_artery_{a}" for a in ARTERIES),
     "cost_volume",
@@ -232,6 +245,8 @@ def print_table(table: list[dict]) -> None:
         separate = " ".join(_pm(t, f"diameter_error_per_artery_{a}") for a in ARTERIES)
         length = " ".join(_pm(t, f"length_error_{a}") for a in ARTERIES)
         length_separate = " ".join(_pm(t, f"length_error_per_artery_{a}") for a in ARTERIES)
+        confluence = " ".join(_pm(t, f"diameter_error_confluence_{a}") for a in ARTERIES)
+        length_confluence = " ".join(_pm(t, f"length_error_confluence_{a}") for a in ARTERIES)
         inlets = " ".join(
             f"{name} D {t['root_diameter_um_' + name]:.0f} um, share {t['terminal_share_' + name]:.2f}"
             for name in (k.removeprefix("terminal_share_") for k in t if k.startswith("terminal_share_"))
@@ -242,6 +257,8 @@ def print_table(table: list[dict]) -> None:
             f"orders {_pm(t, 'n_orders', '.2f')}, ratio/order {_pm(t, 'diameter_ratio_per_order', '.2f')}\n"
             f"    diameter {diam} | terminal-aligned {aligned} | per artery {separate}\n"
             f"    length {length} | per artery {length_separate}\n"
+            f"    confluence reading: orders {_pm(t, 'n_orders_confluence', '.2f')}, diameter {confluence}, "
+            f"length {length_confluence}\n"
             f"    C_v {t['cost_volume']:.3g} W, C_w {t['cost_power']:.3g} W, (A_o/A_wv) C_o "
             f"{t['cost_exclusion_weighted']:.3g} W ({t['exclusion_share_terminal_segments']:.4f} on terminal "
             f"segments), mean pressure drop {t['pressure_drop_mean_Pa'] / 1e3:.2f} kPa; {inlets}\n"

@@ -272,6 +272,37 @@ def test_dds_converges_on_noisy_random_trees():
         assert np.all(np.diff(means) > 0)
 
 
+def test_dds_confluence_reading_keeps_orders_monotone_toward_the_root():
+    # Same tree and diameters as above, read the other way (module docstring of ordering).
+    # Pass 1 (Strahler stats, B(1,2) = 38): terminals 10 -> 1, terminal 2 (50) -> 2;
+    #   node 5: daughters 1, 1 and 36 <= 38 -> 1; node 3: daughters 1, 1 and 48 > 38 -> 2;
+    #   node 1: daughters 2, 2, no order above 2 -> 3 (conventional). 3 of 7 change.
+    # Pass 2: order 1 = [10, 36, 10, 10] (16.5, SD 13), order 2 = [50, 48] (49, SD 1.414),
+    #   order 3 = [60]: B(1,2) = 38.54, B(2,3) = 55.21; 36 stays 1, 48 stays 2, 60 > 55.21
+    #   stays 3: converged. The range reading puts node 5 (36) on order 1 too, but lifts
+    #   nothing above its daughters' orders: it ends with two orders where this has three.
+    parent, _, radius, kind = trunk_tree(DDS_DIAMETERS)
+    res = diameter_defined_strahler(parent, radius, kind, reading="confluence")
+    assert res.orders.tolist() == [0, 3, 2, 2, 1, 1, 1, 1]
+    assert (res.n_iter, res.converged) == (2, True)
+    np.testing.assert_allclose(res.changed, [3 / 7, 0.0])
+    with pytest.raises(ValueError, match="reading"):
+        diameter_defined_strahler(parent, radius, kind, reading="rule")
+
+
+def test_dds_confluence_reading_on_noisy_random_trees():
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        parent, _, radius, kind = random_tree(300, rng, noise=0.15)
+        res = diameter_defined_strahler(parent, radius, kind, reading="confluence")
+        seg = np.flatnonzero(parent >= 0)
+        assert res.converged
+        assert np.unique(res.orders[seg]).tolist() == list(range(1, res.orders.max() + 1))
+        # never lower than a daughter: orders do not decrease toward the root
+        inner = seg[parent[parent[seg]] >= 0]  # segments whose parent node has a segment
+        assert np.all(res.orders[parent[inner]] >= res.orders[inner])
+
+
 def test_shift_orders():
     assert shift_orders([0, 1, 2, 3]).tolist() == [0, 9, 10, 11]
     assert shift_orders([0, 1, 2, 3], top=5).tolist() == [0, 3, 4, 5]
@@ -489,6 +520,20 @@ def test_zero_length_root_is_contracted_not_counted_as_the_top_order():
         morphometry(parent, position, radius, kind, min_segment_length=0),
     )
     assert a.equals(b) and a.attrs["n_contracted_segments"] == 0
+
+
+def test_micrometre_root_left_by_the_polish_is_contracted():
+    # N = 6000 seed 1 ended with its first branch point 0.57 um from the ostium: no vessel,
+    # but under a 1 nm threshold a spurious order 11 of that length. A real short segment
+    # (50 um, shorter than the tree's other segments but longer than the threshold) stays.
+    parent, position, radius, kind = symmetric_tree()
+    for offset, contracted in ((0.57e-6, 1), (50e-6, 0)):
+        pos = position.copy()
+        pos[0] = pos[15] + [offset, 0.0, 0.0]
+        ds = morphometry(parent, pos, radius, kind)
+        assert ds.attrs["n_contracted_segments"] == contracted
+        counts = ds.element_count.sel(scheme="diameter_defined").values.tolist()
+        assert counts == ([8, 4, 2] if contracted else [8, 4, 2, 1])
 
 
 def test_contraction_keeps_zero_length_terminals_and_merges_chains():

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import itertools
 import os
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -259,6 +260,27 @@ def test_best_trees_are_exported_as_vtp_and_csv(swept):
         assert cell["order"].max() == 11
         table = pd.read_csv(out / "trees" / f"{run.run_id}.csv")
         assert len(table) == n_nodes and table.radius_m.notna().sum() == n_nodes - n_inlets
+
+
+def test_exports_of_a_superseded_best_tree_are_removed(swept, tmp_path):
+    # As when a better seed finishes after a first reduction: that reduction's exports and
+    # tree figure of the former best stay behind unless the next reduction removes them.
+    out = tmp_path / "sweep"
+    shutil.copytree(swept[0] / "runs", out / "runs")
+    first = reduce_mod.reduce(out, figures=False, stream=io.StringIO())
+    best = {r.run_id for r in first.best.values()}
+    former = sorted({p.name.removesuffix(".zarr") for p in (out / "runs").glob("*.zarr")} - best)[0]
+    stale = [out / "trees" / f"{former}.vtp", out / "trees" / f"{former}.csv", out / "figures" / f"tree_{former}.png"]
+    (out / "figures").mkdir()
+    for path in stale:
+        path.write_text("from an earlier reduction")
+    mine = out / "trees" / "notes.txt"
+    mine.write_text("not named after a run")
+    stream = io.StringIO()
+    second = reduce_mod.reduce(out, figures=False, stream=stream)
+    assert sorted(second.removed) == sorted(stale) and not any(p.exists() for p in stale)
+    assert mine.exists() and all((out / "trees" / f"{b}.vtp").exists() for b in best)
+    assert "removed 3 exports and figures" in stream.getvalue()
 
 
 def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_path):

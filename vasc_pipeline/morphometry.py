@@ -20,11 +20,17 @@ Diameter-defined Strahler ordering and its edge cases: see :mod:`vasc_pipeline.o
 
 Zero-length segments: the anneal's optimal branch points may coincide with their parent
 branch point (the optimum of a three-point junction sits on a vertex), leaving a segment of
-length zero between two bifurcations: a trifurcation written as two bifurcations. Ordered
-as they stand, such a segment counts as a vessel of its own and, at an ostium, becomes a
-spurious highest order of zero length that shifts every other order down by one.
-:func:`morphometry` therefore contracts segments shorter than ``min_segment_length``
-(default 1 nm, far below any vessel and far above round-off) whose child is a branching
+length zero between two bifurcations: a trifurcation written as two bifurcations. The final
+polish converges to such a vertex only to within a few micrometres: of 32 heart trees
+(size and m_b scans, N = 500-6000), 8 have a root segment (ostium to first branch point)
+shorter than 6 µm (0.57, 1.2 and 5.7 µm in three of them, under 1 nm in the others),
+every other root segment is 1.39 mm or longer, and N = 6000 trees hold ~50 segments of
+0.1-1 µm between branch points. Ordered as they stand, such a segment counts
+as a vessel of its own and, at an ostium, becomes a spurious highest order of zero length
+that shifts every other order down by one. :func:`morphometry` therefore contracts
+segments shorter than ``min_segment_length`` (default 10 µm: shorter than the radius of
+every vessel of the heart's trees up to N ~ 20 000, so no such segment can be a vessel a
+cast would show) whose child is a branching
 node, and orders the resulting tree, which may have multifurcations: conventional Strahler
 gives ``n + 1`` when the two highest daughter orders are both ``n``; asymmetry ratios use
 the smallest and largest daughter. Zero-length *terminal* segments (a terminal on its
@@ -325,6 +331,7 @@ def morphometry(
     max_iter: int = 100,
     tol: float = 0.01,
     min_segment_length: float = MIN_SEGMENT_LENGTH,
+    reading: str = "range",
 ) -> xr.Dataset:
     """Order-wise morphometry of a tree (or forest) as a labelled dataset.
 
@@ -337,8 +344,9 @@ def morphometry(
     top : int or None
         Both order schemes are shifted so that their highest order equals ``top``
         (Kassab's trunk order 11); None keeps raw orders (1 = terminal).
-    max_iter, tol
-        Passed to :func:`diameter_defined_strahler`.
+    max_iter, tol, reading
+        Passed to :func:`diameter_defined_strahler` (``reading``: "range", SPEC's, or
+        "confluence").
     min_segment_length : float
         Segments between branch points shorter than this (metres) are contracted before
         ordering (:func:`contract_short_segments`; 0 keeps the tree as it is).
@@ -375,7 +383,7 @@ def morphometry(
     seg = np.flatnonzero(parent >= 0)
     diameter = full_diameter[kept]
     length = segment_lengths(parent, np.asarray(position, dtype=float)[kept])
-    dds = diameter_defined_strahler(parent, radius, kind, max_iter=max_iter, tol=tol)
+    dds = diameter_defined_strahler(parent, radius, kind, max_iter=max_iter, tol=tol, reading=reading)
     raw = {"diameter_defined": dds.orders, "strahler": strahler_orders(parent, kind)}
     shifted = {k: (shift_orders(v, top, mask=parent >= 0) if top is not None else v) for k, v in raw.items()}
     levels = _order_range(*(v[seg] for v in shifted.values()))
@@ -434,7 +442,7 @@ def morphometry(
         n_contracted_segments=int(full_parent.size - kept.size),
         min_segment_length=float(min_segment_length),
         top_order=-1 if top is None else int(top),
-        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment (see vasc_pipeline.morphometry); "
+        ordering=f"diameter_defined: Jiang, Kassab & Fung 1994 {reading} reassignment (see vasc_pipeline.morphometry); "
         "strahler: conventional Strahler",
     )
     return ds

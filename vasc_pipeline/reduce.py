@@ -71,6 +71,7 @@ class Reduction:
     comparison_summary_csv: Path
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
+    removed: list[Path] = field(default_factory=list)  # superseded tree exports and figures
     skipped: dict[str, str] = field(default_factory=dict)  # store -> why it was not used
     damaged: dict[str, str] = field(default_factory=dict)  # the skipped stores that fail their checks
     errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
@@ -184,6 +185,28 @@ def format_comparison(summary: xr.DataTree) -> str:
 # The stage
 
 
+def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list[Path]:
+    """Delete the tree exports and tree figures of runs that are no longer their cell's best.
+
+    A cell's best tree changes when a better seed finishes; the earlier reduction's
+    ``trees/<run_id>.{vtp,csv}`` and ``figures/tree_<run_id>.png`` would otherwise stay
+    beside the new ones. Only files named after a store in ``runs/`` are touched.
+    """
+    out = Path(output_dir)
+    current = {r.run_id for r in best.values()}
+    removed = []
+    for store_path in sorted((out / RUNS_DIR).glob("*.zarr")):
+        run_id = store_path.name.removesuffix(".zarr")
+        if run_id in current:
+            continue
+        exports = (out / "trees" / f"{run_id}{suffix}" for suffix in (".vtp", ".csv"))
+        for path in (*exports, out / "figures" / f"tree_{run_id}.png"):
+            if path.is_file():
+                path.unlink()
+                removed.append(path)
+    return removed
+
+
 def reduce(
     output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True, stream: TextIO | None = None
 ) -> Reduction:
@@ -231,6 +254,7 @@ def reduce(
         out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped, damaged=damaged
     )
     stream.write(format_comparison(summary) + "\n")
+    result.removed = remove_superseded_outputs(out, best)
     if exports:
         from .export import export_run
 
@@ -255,6 +279,8 @@ def reduce(
         lines.append(f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv)")
     if result.figures:
         lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")
+    if result.removed:
+        lines.append(f"  removed {len(result.removed)} exports and figures of trees no longer their cell's best")
     for path, why in skipped.items():
         lines.append(f"  left out: {why if path in damaged else f'{path}: {why}'}")
     for stage, error in result.errors.items():

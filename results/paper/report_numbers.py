@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from vasc_pipeline.morphometry import inlet_of
+from vasc_pipeline.morphometry import compare_with_kassab, inlet_of, morphometry
+from vasc_pipeline.ordering import READINGS
 
 HERE = Path(__file__).resolve().parent
 SCHEME = "diameter_defined"
@@ -91,6 +92,35 @@ def size_scan(summary: xr.DataTree) -> None:
     print(f"symmetric value 2^(-1/gamma) = {float(asym['symmetric_ratio'].max()):.3f}")
 
 
+def tree_arrays(study: str, run_id: str) -> tuple:
+    """(parent, position, radius, kind) of an exported tree (trees/<run_id>.csv)."""
+    table = pd.read_csv(HERE / study / "trees" / f"{run_id}.csv")
+    parent = table["parent"].fillna(-1).to_numpy(dtype=np.int64)
+    position = table[["x_m", "y_m", "z_m"]].to_numpy()
+    return parent, position, table["radius_m"].fillna(0.0).to_numpy(), table["kind"].to_numpy(dtype=np.int8)
+
+
+def size_scan_readings(summary: xr.DataTree) -> None:
+    """The best trees under both readings of Jiang's reassignment (vasc_pipeline.ordering)."""
+    morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
+    print("\n## size_scan: the best trees under both readings of the ordering (trees/<run_id>.csv)")
+    print("N | reading | orders | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | dex D LAD per order (trunk = 11)")
+    for n in morph.n_terminals.values:
+        run_id = str(morph["best_run_id"].sel(n_terminals=n).values)
+        if not run_id:
+            continue
+        arrays = tree_arrays("size_scan", run_id)
+        for reading in READINGS:
+            ds = morphometry(*arrays, reading=reading)
+            tables = {a: compare_with_kassab(ds, a) for a in ("RCA", "LAD", "LCX")}
+            d = "/".join(f"{t.attrs['mean_abs_log10_ratio_diameter']:.3f}" for t in tables.values())
+            ln = "/".join(f"{t.attrs['mean_abs_log10_ratio_length']:.2f}" for t in tables.values())
+            lad = tables["LAD"].dropna(subset=["diameter_log10_ratio"])
+            per_order = ", ".join(f"{o}: {v:+.2f}" for o, v in lad["diameter_log10_ratio"].items())
+            n_orders = int((ds["element_count"].sel(scheme=SCHEME) > 0).sum())
+            print(f"{int(n)} | {reading} | {n_orders} | {d} | {ln} | {per_order}")
+
+
 def mb_scan(summary: xr.DataTree) -> None:
     morph = summary["morphometry"].to_dataset().squeeze("n_terminals", drop=True).sel(scheme=SCHEME)
     asym = summary["asymmetry"].to_dataset().squeeze("n_terminals", drop=True).sel(scheme=SCHEME)
@@ -151,6 +181,7 @@ def main() -> int:
     found = False
     if (s := open_summary("size_scan")) is not None:
         size_scan(s)
+        size_scan_readings(s)
         found = True
     if (s := open_summary("mb_scan")) is not None:
         mb_scan(s)
