@@ -16,7 +16,8 @@ level):
 - the cost balance: C_v, C_w, the weighted exclusion (A_o/A_wv) C_o and the share of C_o
   carried by terminal segments, the mean pressure drop C_w / Q0 [Pa];
 - the inlet split: per inlet (LCA, RCA) root diameter and share of the terminals (flow);
-- ``cavity_share`` as stored, and ``n_contracted_segments``;
+- ``cavity_share`` as stored, ``n_contracted_segments`` and the contraction threshold
+  ``min_segment_length`` (m) they were ordered with;
 - where the branch points sit (:func:`placement_row`): the share of bifurcations outside the
   exclusion domain, their median distance from it, the terminal segments' median length.
 
@@ -171,6 +172,7 @@ def row_of(path: Path, root: Path) -> dict:
     present = (dds.element_count > 0).values
     orders = dds.order.values[present]
     row["n_contracted_segments"] = int(morph.attrs["n_contracted_segments"])
+    row["min_segment_length"] = float(morph.attrs["min_segment_length"])  # m; rows before 2026-11-24: 1e-9
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
     row.update(morphometry_row(morph))
     # the other reading of Jiang's reassignment (vasc_pipeline.ordering): orders monotone toward the root

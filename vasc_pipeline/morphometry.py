@@ -21,11 +21,11 @@ Diameter-defined Strahler ordering and its edge cases: see :mod:`vasc_pipeline.o
 Zero-length segments: the anneal's optimal branch points may coincide with their parent
 branch point (the optimum of a three-point junction sits on a vertex), leaving a segment of
 length zero between two bifurcations: a trifurcation written as two bifurcations. The final
-polish converges to such a vertex only to within a few micrometres: of 32 heart trees
-(size and m_b scans, N = 500-6000), 8 have a root segment (ostium to first branch point)
-shorter than 6 µm (0.57, 1.2 and 5.7 µm in three of them, under 1 nm in the others),
-every other root segment is 1.39 mm or longer, and N = 6000 trees hold ~50 segments of
-0.1-1 µm between branch points. Ordered as they stand, such a segment counts
+polish converges to such a vertex only to within a few micrometres: of over a hundred heart
+trees of N = 500-6000 (several schedules and options), 14 have a root segment (ostium to
+first branch point) shorter than 10 µm (9 under 1 nm; 0.57, 1.2, 2.2, 5.7 and 6.2 µm), the
+next shortest is 0.39 mm, and N = 6000 trees hold ~50 segments of 0.1-1 µm between
+branch points. Ordered as they stand, such a segment counts
 as a vessel of its own and, at an ostium, becomes a spurious highest order of zero length
 that shifts every other order down by one. :func:`morphometry` therefore contracts
 segments shorter than ``min_segment_length`` (default 10 µm: shorter than the radius of

@@ -19,9 +19,9 @@ consecutive orders and repeat until fewer than ``tol`` of the segments change or
   the current top order, as in conventional Strahler), and otherwise the highest daughter
   order. Orders never decrease toward the root.
 
-On the heart's trees the readings differ by about one order in the count (the confluence
-reading has fewer where the low orders are close in diameter), which moves the whole
-ladder against Kassab's (README, Fidelity). Edge cases, decided here (both readings):
+On the heart's trees (N = 1000-6000) the confluence reading mostly has one order fewer, which
+moves the whole ladder by one of Kassab's orders (README, Fidelity); on other trees it can
+have more (tests). Edge cases, decided here (both readings):
 
 - SD is the sample SD (ddof=1); an order holding a single segment has SD 0 in the bounds
   (its interval is centred on that diameter). In the reported statistics such an SD is

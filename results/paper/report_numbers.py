@@ -27,12 +27,19 @@ def open_summary(study: str) -> xr.DataTree | None:
     return xr.open_datatree(path, engine="zarr") if path.is_dir() else None
 
 
-def inlet_shares(study: str, run_id: str) -> str:
-    """Share of the best tree's terminals fed by each inlet, from its exported CSV (trees/<run_id>.csv)."""
+def tree_arrays(study: str, run_id: str) -> tuple:
+    """(parent, position, radius, kind) of an exported tree (trees/<run_id>.csv)."""
     table = pd.read_csv(HERE / study / "trees" / f"{run_id}.csv")
     parent = table["parent"].fillna(-1).to_numpy(dtype=np.int64)
+    position = table[["x_m", "y_m", "z_m"]].to_numpy()
+    return parent, position, table["radius_m"].fillna(0.0).to_numpy(), table["kind"].to_numpy(dtype=np.int8)
+
+
+def inlet_shares(study: str, run_id: str) -> str:
+    """Share of the best tree's terminals fed by each inlet, from its exported CSV (trees/<run_id>.csv)."""
+    parent, _, _, kind = tree_arrays(study, run_id)
     inlet = inlet_of(parent)
-    terminal = table["kind"].to_numpy() == 2
+    terminal = kind == 2
     return "/".join(f"{np.mean(inlet[terminal] == i):.2f}" for i in np.flatnonzero(parent < 0))
 
 
@@ -90,14 +97,6 @@ def size_scan(summary: xr.DataTree) -> None:
         ]
         print(f"N = {int(n)}: " + ", ".join(cells))
     print(f"symmetric value 2^(-1/gamma) = {float(asym['symmetric_ratio'].max()):.3f}")
-
-
-def tree_arrays(study: str, run_id: str) -> tuple:
-    """(parent, position, radius, kind) of an exported tree (trees/<run_id>.csv)."""
-    table = pd.read_csv(HERE / study / "trees" / f"{run_id}.csv")
-    parent = table["parent"].fillna(-1).to_numpy(dtype=np.int64)
-    position = table[["x_m", "y_m", "z_m"]].to_numpy()
-    return parent, position, table["radius_m"].fillna(0.0).to_numpy(), table["kind"].to_numpy(dtype=np.int8)
 
 
 def size_scan_readings(summary: xr.DataTree) -> None:
