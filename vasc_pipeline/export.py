@@ -37,7 +37,7 @@ import pandas as pd
 from . import morphometry as _m
 from .topology import KIND_TERMINAL, check_tree_arrays, segment_lengths, terminals_downstream
 
-__all__ = ["terminals_downstream", "tree_table", "write_vtp", "write_csv", "export_tree", "export_run"]
+__all__ = ["terminals_downstream", "tree_table", "write_vtp", "write_csv", "export_paths", "export_tree", "export_run"]
 
 
 def tree_table(
@@ -174,6 +174,12 @@ def write_csv(path, table: pd.DataFrame) -> Path:
     return path
 
 
+def export_paths(out_dir, name: str) -> tuple[Path, Path]:
+    """``<out_dir>/<name>.vtp`` and ``<out_dir>/<name>.csv``: where :func:`export_tree` writes."""
+    out = Path(out_dir)
+    return out / f"{name}.vtp", out / f"{name}.csv"
+
+
 def export_tree(
     out_dir, name: str, parent, position, radius, kind, *, total_flow: float | None = None, orders=None, strahler=None
 ) -> tuple[Path, Path]:
@@ -181,10 +187,10 @@ def export_tree(
 
     Parameters are those of :func:`tree_table`.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     table = tree_table(parent, position, radius, kind, total_flow=total_flow, orders=orders, strahler=strahler)
-    return write_vtp(out / f"{name}.vtp", table), write_csv(out / f"{name}.csv", table)
+    vtp, csv = export_paths(out_dir, name)
+    return write_vtp(vtp, table), write_csv(csv, table)
 
 
 def export_run(store_path, out_dir, name: str | None = None) -> tuple[Path, Path]:

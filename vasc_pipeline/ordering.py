@@ -96,6 +96,16 @@ def strahler_orders(parent, kind) -> np.ndarray:
     """
     parent = _parent_array(parent)
     check_tree_arrays(parent, kind, multifurcations=True)
+    return _orders_toward_the_root(parent, kind, [1] * parent.size, lambda v, n: n + 1)
+
+
+def _orders_toward_the_root(parent, kind, terminal_order, confluence) -> np.ndarray:
+    """Orders from the periphery to the root, the pattern of every Strahler-type scheme.
+
+    A terminal segment gets ``terminal_order[v]``; a branching node's segment the highest
+    daughter order n, or ``confluence(v, n)`` where the two highest daughter orders are both
+    n. Inlets get 0. Returns int64 (node,).
+    """
     start, child = _child_lists(parent)
     start, child = start.tolist(), child.tolist()
     kinds = np.asarray(kind).tolist()
@@ -105,7 +115,7 @@ def strahler_orders(parent, kind) -> np.ndarray:
     for v in reversed(topological_order(parent).tolist()):
         k = kinds[v]
         if k == KIND_TERMINAL:
-            order[v] = 1
+            order[v] = terminal_order[v]
         elif k == KIND_BIFURCATION:
             top = second = 0
             for c in child[start[v] : start[v + 1]]:
@@ -114,7 +124,7 @@ def strahler_orders(parent, kind) -> np.ndarray:
                     top, second = o, top
                 elif o > second:
                     second = o
-            order[v] = top + 1 if second == top else top
+            order[v] = confluence(v, top) if second == top else top
     return np.array(order, dtype=np.int64)
 
 
@@ -132,13 +142,17 @@ def _order_bounds(diameter: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, 
     return labels, np.maximum.accumulate(bounds)  # non-monotone bounds: the squeezed order empties
 
 
+def _range_orders(labels: np.ndarray, bounds: np.ndarray, diameter: np.ndarray) -> np.ndarray:
+    """The order whose interval holds each diameter: order k holds bounds[k-1] < D <= bounds[k]."""
+    return labels[np.searchsorted(bounds, diameter, side="left")]
+
+
 def _dds_pass(diameter: np.ndarray, order: np.ndarray) -> np.ndarray:
     """One range reassignment of diameter-defined orders (segments only, no fillers)."""
     labels, bounds = _order_bounds(diameter, order)
     if labels.size < 2:
         return order.copy()
-    # order k holds bounds[k-1] < D <= bounds[k]
-    return labels[np.searchsorted(bounds, diameter, side="left")]
+    return _range_orders(labels, bounds, diameter)
 
 
 def _confluence_pass(parent, kind, seg, diameter: np.ndarray, order: np.ndarray) -> np.ndarray:
@@ -148,35 +162,19 @@ def _confluence_pass(parent, kind, seg, diameter: np.ndarray, order: np.ndarray)
         return order.copy()
     labels_l, bounds_l = labels.tolist(), bounds.tolist()
     rank = {o: k for k, o in enumerate(labels_l)}
-    by_node = dict(zip(seg.tolist(), range(seg.size)))
-    d = diameter.tolist()
-    terminal_order = labels[np.searchsorted(bounds, diameter, side="left")].tolist()
-    start, child = _child_lists(parent)
-    start, child = start.tolist(), child.tolist()
-    kinds = np.asarray(kind).tolist()
-    new = [0] * seg.size
-    for v in reversed(topological_order(parent).tolist()):  # children before parents
-        i = by_node.get(v)
-        if i is None:  # an inlet: no segment
-            continue
-        if kinds[v] == KIND_TERMINAL:
-            new[i] = terminal_order[i]
-            continue
-        top = second = 0
-        for c in child[start[v] : start[v + 1]]:
-            o = new[by_node[c]]
-            if o > top:
-                top, second = o, top
-            elif o > second:
-                second = o
-        if second == top:
-            k = rank.get(top)
-            if k is None or k == len(labels_l) - 1:  # no order above: conventional Strahler
-                top += 1
-            elif d[i] > bounds_l[k]:
-                top = labels_l[k + 1]
-        new[i] = top
-    return np.array(new, dtype=np.int64)
+    terminal_order = np.zeros(parent.size, dtype=np.int64)  # by node; read at terminals only
+    terminal_order[seg] = _range_orders(labels, bounds, diameter)
+    d = np.zeros(parent.size)
+    d[seg] = diameter
+    d = d.tolist()
+
+    def confluence(v: int, n: int) -> int:
+        k = rank.get(n)
+        if k is None or k == len(labels_l) - 1:  # no order above: conventional Strahler
+            return n + 1
+        return labels_l[k + 1] if d[v] > bounds_l[k] else n
+
+    return _orders_toward_the_root(parent, kind, terminal_order.tolist(), confluence)[seg]
 
 
 class DDSResult(NamedTuple):

@@ -192,6 +192,8 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
     ``trees/<run_id>.{vtp,csv}`` and ``figures/tree_<run_id>.png`` would otherwise stay
     beside the new ones. Only files named after a store in ``runs/`` are touched.
     """
+    from .export import export_paths
+
     out = Path(output_dir)
     current = {r.run_id for r in best.values()}
     removed = []
@@ -199,8 +201,8 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
         run_id = store_path.name.removesuffix(".zarr")
         if run_id in current:
             continue
-        exports = (out / "trees" / f"{run_id}{suffix}" for suffix in (".vtp", ".csv"))
-        for path in (*exports, out / "figures" / f"tree_{run_id}.png"):
+        # the tree figure's name is make_figures' (vasc_pipeline.figures, not imported here: matplotlib)
+        for path in (*export_paths(out / "trees", run_id), out / "figures" / f"tree_{run_id}.png"):
             if path.is_file():
                 path.unlink()
                 removed.append(path)
