@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import asdict
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
+from vasc_pipeline.config import ConfigError, compose, to_run_config, validate
+from vasc_pipeline.identity import config_hash
 from vasc_pipeline.tissue import TissueError, build_tissue, heart
 
 TARGET_G = 218.0
@@ -218,3 +221,42 @@ def test_large_vessels_stay_out_of_the_cavities_after_a_fixed_seed_anneal():
     old = engine.run(config.compose(["n_terminals=200", "tissue.exclude_cavities=false"]), seed=0)
     assert old.statistics == {}  # no cavity in its tissue: nothing to report
     assert cavity_share(old.tree.parent, old.tree.position, old.radius, result.problem.tissue) > 0.1
+
+
+def test_ostium_height_places_both_ostia_above_the_base_in_metres(dims):
+    assert dims["ostium_height"] == pytest.approx(0.005 * dims["scale"])  # the reference's 5 mm, scaled
+    t = heart.heart_tissue(300, ostium_height=0.015)
+    reference = np.array(dims["inlets"])
+    np.testing.assert_allclose(t.inlets[:, 2], 0.015)
+    np.testing.assert_allclose(t.inlets[:, :2], reference[:, :2])  # on the aortic root's wall, as before
+    assert not t.contains(t.inlets).any()
+    assert np.all(t.inlets < t.bounds[1])  # the grid grows to hold them
+    default = heart.heart_tissue(300)
+    # the same voxelised myocardium: the grid only gains layers on top
+    np.testing.assert_allclose(t.origin, default.origin, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(t.mask[: default.shape[0]], default.mask)
+    assert t.shape[0] > default.shape[0] and not t.mask[default.shape[0] :].any()
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["tissue.ostium_height=-0.001"], r"tissue.ostium_height must be a height .* in \[0, 0.05\]"),
+        (["tissue.ostium_height=0.2"], "tissue.ostium_height must be"),
+        (["tissue=sphere", "tissue.ostium_height=0.01"], "tissue=sphere has none"),
+    ],
+)
+def test_bad_ostium_height_is_refused_naming_the_field(overrides, message):
+    with pytest.raises(ConfigError, match=message):
+        validate(to_run_config(compose(overrides)))
+
+
+def test_runs_stored_before_ostium_height_keep_their_identity():
+    base = to_run_config(compose([]))
+    explicit = to_run_config(compose(["tissue.ostium_height=null"]))
+    assert explicit.tissue.ostium_height is None
+    assert config_hash(asdict(base)) == config_hash(asdict(explicit))
+    stored_before = asdict(base)
+    del stored_before["tissue"]["ostium_height"]
+    assert config_hash(stored_before) == config_hash(asdict(base))
+    assert config_hash(asdict(to_run_config(compose(["tissue.ostium_height=0.01"])))) != config_hash(asdict(base))

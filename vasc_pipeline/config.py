@@ -49,6 +49,7 @@ PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps 
 # (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
 MAX_STEPS = 10**15
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
+MAX_OSTIUM_HEIGHT = 0.05  # m: half the heart's length; higher, the aortic root is not on this heart
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
@@ -65,6 +66,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.inlet_share": None,
     "tissue.inlet_assignment": "random",
     "tissue.bifurcation_reach": None,
+    "tissue.ostium_height": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -91,6 +93,7 @@ class TissueConfig:
     mass_g: float = 218.0  # heart: myocardial mass, g
     density: float = 1.06e3  # heart: myocardial density, kg m^-3
     exclude_cavities: bool = True  # heart: large vessels also kept out of the ventricular cavities
+    ostium_height: Optional[float] = None  # heart: LCA and RCA ostia above the base plane, m; None: 5.8 mm at 218 g
     path: Optional[str] = None  # mask: .npy file or Zarr array
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
@@ -298,6 +301,15 @@ def validate(cfg: RunConfig) -> RunConfig:
             raise ConfigError(
                 "tissue.bifurcation_reach confines the anneal's bifurcations; the CCO growth (method=cco) "
                 "places them at their optimum: leave it unset (null) there"
+            )
+    ostium = cfg.tissue.ostium_height
+    if ostium is not None:
+        if cfg.tissue.name != "heart":
+            raise ConfigError(f"tissue.ostium_height places the heart's ostia; tissue={cfg.tissue.name} has none")
+        if not 0.0 <= ostium <= MAX_OSTIUM_HEIGHT:
+            raise ConfigError(
+                f"tissue.ostium_height must be a height above the heart's base plane in metres, in "
+                f"[0, {MAX_OSTIUM_HEIGHT}], or null (5.8 mm at 218 g), got {ostium}"
             )
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):

@@ -24,7 +24,8 @@ RV cavity                          the same with semi-axes 2.4, 2.9, 4.1
 aortic root (centre of the valve)  x = 1.6, y = -0.4 (over the LV outflow, beside the
                                    septum), radius 1.3
 coronary ostia                     0.5 above the base plane on the root's wall:
-                                   LCA at x = 1.6 - 1.3 (left), RCA at x = 1.6 + 1.3 (right)
+                                   LCA at x = 1.6 - 1.3 (left), RCA at x = 1.6 + 1.3 (right);
+                                   ``ostium_height`` [m, unscaled] replaces the 0.5
 =================================  ==========================================
 
 The RV free wall is the set inside the RV's outer super-ellipsoid, outside its cavity and
@@ -272,6 +273,7 @@ def _build(
     exclude_cavities: bool = True,
     q_required: float | None = None,
     total_flow: float | None = None,
+    ostium_height: float | None = None,
 ) -> tuple[Tissue, dict]:
     d = dict(_dimensions(mass_g, density))
     volume = d["volume"]
@@ -280,6 +282,13 @@ def _build(
     inl = np.array(d["inlets"])
     lo_all = np.minimum(lo, inl.min(axis=0))
     hi_all = np.maximum(hi, inl.max(axis=0))
+    if ostium_height is not None:  # in metres as given, not scaled with the heart
+        d["ostium_height"] = float(ostium_height)
+        d["inlets"] = tuple(map(tuple, _inlets(d).tolist()))
+        inl = np.array(d["inlets"])
+        # Ostia above the default box add whole voxel layers on top: the grid's origin, so
+        # the voxelised heart, stays that of the default ostia.
+        hi_all[2] += h * math.ceil(max(float(inl[:, 2].max() - hi_all[2]), 0.0) / h)
     margin = MARGIN_FRACTION * float(np.max(hi - lo))
     mask, origin = voxelize(_inside(d), lo_all, hi_all, h, margin=margin)
     solid = openings = None
@@ -308,6 +317,7 @@ def heart_dimensions(
     *,
     n_terminals: int = 1000,
     voxel_size: float | None = None,
+    ostium_height: float | None = None,
 ) -> dict:
     """The scaled heart geometry [m] and its masses [g].
 
@@ -324,7 +334,7 @@ def heart_dimensions(
     ``n_terminals``).
     """
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    tissue, d = _build(n_terminals, voxel_size, mass_g, density, exclude_cavities=False)
+    tissue, d = _build(n_terminals, voxel_size, mass_g, density, exclude_cavities=False, ostium_height=ostium_height)
     achieved = tissue.measure * density * 1e3
     d.update(
         voxel_size=float(tissue.voxel_size),
@@ -344,6 +354,7 @@ def heart_tissue(
     exclude_cavities: bool = True,
     q_required: float | None = None,
     total_flow: float | None = None,
+    ostium_height: float | None = None,
     **_,
 ) -> Tissue:
     """The coronary substrate (LV + RV myocardium) with the LCA and RCA ostia as inlets.
@@ -354,10 +365,14 @@ def heart_tissue(
     exclusion domain is the myocardium plus the ventricular cavities closed at the base
     plane ("vessels may not penetrate the ventricles"), or with ``exclude_cavities=False``
     the myocardium only (cavities then cost nothing to cross; the model before 2026-11).
+    ``ostium_height`` [m] places both ostia that far above the base plane on the aortic
+    root's wall (default: the reference heart's 5 mm, scaled: 5.8 mm at 218 g).
     Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
     """
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    tissue, d = _build(n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow)
+    tissue, d = _build(
+        n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height
+    )
     achieved = tissue.measure * density * 1e3
     log.info(
         "heart tissue: %.2f g myocardium as voxelised (target %.2f g, %+.2f%%), %d voxels of %.3g mm, "
