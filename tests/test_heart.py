@@ -38,7 +38,7 @@ def _voxel_centres_z(t):
 def test_reference_volume_is_converged_and_agrees_with_counting_voxels():
     # the fine-grid reference integral is converged ...
     v = heart._reference_volume()
-    assert heart._reference_volume.__wrapped__(1200) == pytest.approx(v, rel=1e-4)
+    assert heart._reference_volume.__wrapped__(n=1200) == pytest.approx(v, rel=1e-4)
     # ... and agrees with an independent estimate: fine voxels counted in the scaled heart
     fine = heart.heart_dimensions(voxel_size=0.6e-3)
     assert fine["mass_g_voxelised"] == pytest.approx(TARGET_G, rel=5e-3)
@@ -243,7 +243,9 @@ def test_ostium_height_places_both_ostia_above_the_base_in_metres(dims):
     [
         (["tissue.ostium_height=-0.001"], r"tissue.ostium_height must be a height .* in \[0, 0.05\]"),
         (["tissue.ostium_height=0.2"], "tissue.ostium_height must be"),
-        (["tissue=sphere", "tissue.ostium_height=0.01"], "tissue=sphere has none"),
+        (["tissue=sphere", "tissue.ostium_height=0.01"], "tissue=sphere is not the heart"),
+        (["tissue=box", "tissue.base_cut=0.2"], r"tissue.base_cut shapes the heart; tissue=box is not the heart"),
+        (["tissue=plane2d", "tissue.elongation=1.2"], "tissue.elongation shapes the heart"),
     ],
 )
 def test_bad_ostium_height_is_refused_naming_the_field(overrides, message):
@@ -251,12 +253,59 @@ def test_bad_ostium_height_is_refused_naming_the_field(overrides, message):
         validate(to_run_config(compose(overrides)))
 
 
-def test_runs_stored_before_ostium_height_keep_their_identity():
+@pytest.mark.parametrize("key, value", [("ostium_height", 0.01), ("base_cut", 0.2), ("elongation", 1.3)])
+def test_runs_stored_before_the_heart_options_keep_their_identity(key, value):
     base = to_run_config(compose([]))
-    explicit = to_run_config(compose(["tissue.ostium_height=null"]))
-    assert explicit.tissue.ostium_height is None
+    explicit = to_run_config(compose([f"tissue.{key}=null"]))
+    assert getattr(explicit.tissue, key) is None
     assert config_hash(asdict(base)) == config_hash(asdict(explicit))
     stored_before = asdict(base)
-    del stored_before["tissue"]["ostium_height"]
+    del stored_before["tissue"][key]
     assert config_hash(stored_before) == config_hash(asdict(base))
-    assert config_hash(asdict(to_run_config(compose(["tissue.ostium_height=0.01"])))) != config_hash(asdict(base))
+    assert config_hash(asdict(to_run_config(compose([f"tissue.{key}={value}"])))) != config_hash(asdict(base))
+
+
+@pytest.mark.parametrize("shape", [dict(base_cut=0.0), dict(base_cut=0.6), dict(elongation=0.7), dict(elongation=1.5)])
+def test_shape_options_reshape_the_heart_at_its_mass(dims, shape):
+    d = heart.heart_dimensions(n_terminals=300, **shape)
+    assert d["mass_g_reference"] == pytest.approx(TARGET_G, rel=1e-4)  # rescaled to the mass
+    assert d["mass_g_voxelised"] == pytest.approx(TARGET_G, rel=0.03)
+    base_cut = shape.get("base_cut", 1.0 / 3.0)
+    elongation = shape.get("elongation", 1.0)
+    assert d["base_cut"] == pytest.approx(base_cut) and d["elongation"] == elongation
+    assert -d["lv_center_z"] / d["lv_outer_half_length"] == pytest.approx(base_cut)
+    assert d["rv_center_z"] == d["lv_center_z"]
+    # length over width of the LV's outer ellipsoid: elongation times the reference's 6 / 3
+    assert d["lv_outer_half_length"] / d["lv_outer_radius"] == pytest.approx(2.0 * elongation)
+    assert d["lv_long_axis"] == pytest.approx((1.0 + base_cut) * d["lv_outer_half_length"])
+    # the ostia keep their scaled 5 mm above the base plane, the walls their x-y thickness
+    assert d["ostium_height"] == pytest.approx(0.005 * d["scale"])
+    assert d["lv_wall_equator"] / d["scale"] == pytest.approx(dims["lv_wall_equator"] / dims["scale"])
+    t = heart.heart_tissue(300, **shape)
+    assert _mass_g(t) == pytest.approx(TARGET_G, rel=0.03)
+    assert np.all(t.inlets[:, 2] == pytest.approx(d["ostium_height"]))
+
+
+def test_unset_shape_is_the_reference_heart(tissue1000):
+    t = heart.heart_tissue(1000, base_cut=None, elongation=None)
+    assert np.array_equal(t.mask, tissue1000.mask) and np.array_equal(t.distance, tissue1000.distance)
+
+
+@pytest.mark.parametrize(
+    "key, value, message",
+    [
+        ("base_cut", -0.1, r"tissue.base_cut must be .* in \[0.0, 0.7\], or null, got -0.1"),
+        ("base_cut", 0.8, "tissue.base_cut must be"),
+        ("elongation", 0.3, r"tissue.elongation must be .* in \[0.5, 2.0\]"),
+        ("elongation", "long", "tissue.elongation must be"),
+    ],
+)
+def test_bad_shape_is_refused_before_any_job(tmp_path, key, value, message):
+    with pytest.raises(TissueError, match=message):
+        heart.heart_tissue(300, **{key: value})
+    if isinstance(value, float):  # and by the command's planning, before anything is written
+        from vasc_pipeline.planning import plan
+
+        with pytest.raises(TissueError, match=message):
+            plan(compose([f"tissue.{key}={value}", f"output_dir={tmp_path / 'out'}", "n_terminals=300"]))
+        assert not (tmp_path / "out").exists()

@@ -67,6 +67,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.inlet_assignment": "random",
     "tissue.bifurcation_reach": None,
     "tissue.ostium_height": None,
+    "tissue.base_cut": None,
+    "tissue.elongation": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -94,6 +96,10 @@ class TissueConfig:
     density: float = 1.06e3  # heart: myocardial density, kg m^-3
     exclude_cavities: bool = True  # heart: large vessels also kept out of the ventricular cavities
     ostium_height: Optional[float] = None  # heart: LCA and RCA ostia above the base plane, m; None: 5.8 mm at 218 g
+    # heart's shape before scaling to mass_g (tissue.heart): the base plane's height above the
+    # LV's equator in LV half-lengths, None: 1/3; the factor on the long-axis lengths, None: 1
+    base_cut: Optional[float] = None
+    elongation: Optional[float] = None
     path: Optional[str] = None  # mask: .npy file or Zarr array
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
@@ -302,10 +308,15 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "tissue.bifurcation_reach confines the anneal's bifurcations; the CCO growth (method=cco) "
                 "places them at their optimum: leave it unset (null) there"
             )
+    for key, what in (
+        ("ostium_height", "places the heart's ostia"),
+        ("base_cut", "shapes the heart"),
+        ("elongation", "shapes the heart"),
+    ):
+        if getattr(cfg.tissue, key) is not None and cfg.tissue.name != "heart":
+            raise ConfigError(f"tissue.{key} {what}; tissue={cfg.tissue.name} is not the heart: leave it unset (null)")
     ostium = cfg.tissue.ostium_height
     if ostium is not None:
-        if cfg.tissue.name != "heart":
-            raise ConfigError(f"tissue.ostium_height places the heart's ostia; tissue={cfg.tissue.name} has none")
         if not 0.0 <= ostium <= MAX_OSTIUM_HEIGHT:
             raise ConfigError(
                 f"tissue.ostium_height must be a height above the heart's base plane in metres, in "

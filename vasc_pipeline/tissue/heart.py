@@ -28,6 +28,13 @@ coronary ostia                     0.5 above the base plane on the root's wall:
                                    ``ostium_height`` [m, unscaled] replaces the 0.5
 =================================  ==========================================
 
+Two options reshape this reference before it is scaled to the mass (both unset by default):
+``elongation`` multiplies every long-axis (z) dimension of both ventricles (half-lengths,
+centres, the RV's z semi-axes; walls and radii in x and y keep theirs), and ``base_cut``
+places the base plane at that fraction of the LV's outer half-length above the LV's
+equator (reference 2.0 / 6.0 = 1/3; 0 cuts at the equator, 0.7 leaves a nearly closed
+ellipsoid). The aortic root and the ostia keep their place relative to the base plane.
+
 The RV free wall is the set inside the RV's outer super-ellipsoid, outside its cavity and
 outside the LV's outer ellipsoid (so the interventricular septum is LV wall); the RV cavity
 is the set inside the RV's inner super-ellipsoid and outside the LV's outer ellipsoid. With
@@ -73,6 +80,11 @@ DEFAULT_MASS_G = 218.0  # g (paper)
 DEFAULT_DENSITY = 1.06e3  # kg m^-3 (paper, Vinnakota 2004)
 RV_EXPONENT = 2.5  # super-ellipsoid exponent of the RV (paper)
 MARGIN_FRACTION = 0.12  # grid margin around the heart, fraction of its largest extent
+# Accepted ranges of the shape options. base_cut < 0.75 keeps the RV cut by the base plane
+# (its top is 4.5 / 6 of the LV's half-length above the equator); elongation 0.5 makes the LV
+# a sphere, 2 twice the reference's length-to-width ratio.
+BASE_CUT_RANGE = (0.0, 0.7)
+ELONGATION_RANGE = (0.5, 2.0)
 
 # Unscaled reference geometry [m] (see the module docstring).
 _CM = 1e-2
@@ -110,9 +122,25 @@ def _check_positive(field: str, value, what: str) -> float:
     return float(value)
 
 
-def _scaled(scale: float) -> dict:
-    dims = {k: float(_BASE[k] * scale) for k in _LENGTH_KEYS}
-    dims.update({k: tuple(float(v * scale) for v in _BASE[k]) for k in _TUPLE_KEYS})
+def _shaped(base_cut: float | None = None, elongation: float | None = None) -> dict:
+    """The unscaled reference geometry [m], reshaped by ``elongation`` and ``base_cut``."""
+    d = dict(_BASE)
+    if elongation is not None:
+        for k in ("lv_center_z", "lv_outer_half_length", "lv_inner_half_length", "rv_center_z"):
+            d[k] = _BASE[k] * elongation
+        for k in ("rv_outer_semi_axes", "rv_inner_semi_axes"):
+            ax, ay, az = _BASE[k]
+            d[k] = (ax, ay, az * elongation)
+    if base_cut is not None:  # the RV's centre stays level with the LV's, as in the reference
+        d["lv_center_z"] = d["rv_center_z"] = -base_cut * d["lv_outer_half_length"]
+    return d
+
+
+def _scaled(scale: float, shape: tuple = (None, None)) -> dict:
+    """The geometry of :func:`_shaped` (``shape`` = (base_cut, elongation)) times ``scale``."""
+    ref = _shaped(*shape)
+    dims = {k: float(ref[k] * scale) for k in _LENGTH_KEYS}
+    dims.update({k: tuple(float(v * scale) for v in ref[k]) for k in _TUPLE_KEYS})
     return dims
 
 
@@ -143,14 +171,14 @@ def _extent(d: dict) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-@functools.lru_cache(maxsize=1)
-def _reference_volume(n: int = 2400) -> float:
+@functools.lru_cache(maxsize=8)
+def _reference_volume(shape: tuple = (None, None), n: int = 2400) -> float:
     """Volume [m^3] of the unscaled myocardium: midpoint rule over (x, z), exact in y.
 
     Per column (x, z) below the base plane the tissue in y >= 0 is the LV wall
     [Y_lv_inner, Y_lv_outer] plus the RV free wall [max(Y_rv_inner, Y_lv_outer), Y_rv_outer].
     """
-    d = _scaled(1.0)
+    d = _scaled(1.0, shape)
     lo, hi = _extent(d)
     hx = (hi[0] - lo[0]) / n
     hz = (hi[2] - lo[2]) / n
@@ -163,9 +191,9 @@ def _reference_volume(n: int = 2400) -> float:
     return 2.0 * total * hx * hz
 
 
-def _scale_for(mass_g: float, density: float) -> float:
+def _scale_for(mass_g: float, density: float, shape: tuple = (None, None)) -> float:
     target = mass_g * 1e-3 / density
-    return (target / _reference_volume()) ** (1.0 / 3.0)
+    return (target / _reference_volume(shape)) ** (1.0 / 3.0)
 
 
 def _inside(d: dict, solid: bool = False):
@@ -223,9 +251,9 @@ def _inlets(d: dict) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _dimensions(mass_g: float, density: float) -> dict:
-    s = float(_scale_for(mass_g, density))
-    d = _scaled(s)
+def _dimensions(mass_g: float, density: float, shape: tuple = (None, None)) -> dict:
+    s = float(_scale_for(mass_g, density, shape))
+    d = _scaled(s, shape)
     lo, hi = _extent(d)
     d.update(
         scale=s,
@@ -241,10 +269,12 @@ def _dimensions(mass_g: float, density: float) -> dict:
         bbox_hi=tuple(hi.tolist()),
         inlets=tuple(map(tuple, _inlets(d).tolist())),
         inlet_names=("LCA", "RCA"),
-        volume=float(_reference_volume() * s**3),
+        volume=float(_reference_volume(shape) * s**3),
         mass_g_target=mass_g,
         density=density,
-        mass_g_reference=float(_reference_volume() * s**3 * density * 1e3),
+        mass_g_reference=float(_reference_volume(shape) * s**3 * density * 1e3),
+        base_cut=-d["lv_center_z"] / d["lv_outer_half_length"],
+        elongation=1.0 if shape[1] is None else float(shape[1]),
     )
     return d
 
@@ -274,8 +304,9 @@ def _build(
     q_required: float | None = None,
     total_flow: float | None = None,
     ostium_height: float | None = None,
+    shape: tuple = (None, None),
 ) -> tuple[Tissue, dict]:
-    d = dict(_dimensions(mass_g, density))
+    d = dict(_dimensions(mass_g, density, shape))
     volume = d["volume"]
     h = voxel_size if voxel_size is not None else default_voxel_size(n_terminals, volume, 3, q_required, total_flow)
     lo, hi = np.array(d["bbox_lo"]), np.array(d["bbox_hi"])
@@ -301,6 +332,22 @@ def _build(
     return tissue, d
 
 
+def _check_shape(base_cut, elongation) -> tuple:
+    """(base_cut, elongation) as floats or None, each in its range (TissueError naming it)."""
+    shape = []
+    for field, value, (low, high), what in (
+        ("base_cut", base_cut, BASE_CUT_RANGE, "the base plane's height above the LV's equator, in LV half-lengths"),
+        ("elongation", elongation, ELONGATION_RANGE, "the factor on the ventricles' long-axis dimensions"),
+    ):
+        if value is not None:
+            ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and low <= value <= high
+            if not ok:
+                raise TissueError(f"tissue.{field} must be {what}, in [{low}, {high}], or null, got {value!r}")
+            value = float(value)
+        shape.append(value)
+    return tuple(shape)
+
+
 def _validate(n_terminals, voxel_size, mass_g, density) -> tuple[float | None, float, float]:
     mass_g = _check_positive("mass_g", mass_g, "myocardial mass in grams, > 0")
     density = _check_positive("density", density, "myocardial density in kg m^-3, > 0")
@@ -318,6 +365,8 @@ def heart_dimensions(
     n_terminals: int = 1000,
     voxel_size: float | None = None,
     ostium_height: float | None = None,
+    base_cut: float | None = None,
+    elongation: float | None = None,
 ) -> dict:
     """The scaled heart geometry [m] and its masses [g].
 
@@ -326,7 +375,8 @@ def heart_dimensions(
     ``rv_center_x`` (= ``rv_offset``), ``rv_center_z``, ``rv_outer_semi_axes``,
     ``rv_inner_semi_axes``, ``aortic_root_center``, ``aortic_root_radius``,
     ``ostium_height``), derived ones (``lv_long_axis``, ``lv_wall_equator``,
-    ``lv_wall_apex``, ``rv_free_wall``, ``base_z`` = 0, ``apex_z``, ``bbox_lo``/``bbox_hi``),
+    ``lv_wall_apex``, ``rv_free_wall``, ``base_z`` = 0, ``apex_z``, ``bbox_lo``/``bbox_hi``,
+    ``base_cut`` and ``elongation`` as used),
     ``inlets`` and ``inlet_names``, ``scale`` (factor applied to the reference dimensions),
     ``volume`` [m^3] and ``mass_g_reference`` (fine-grid mass, equal to ``mass_g``), and
     ``voxel_size``, ``n_tissue_voxels`` and ``mass_g_voxelised`` (``mass_g`` in short): the
@@ -334,7 +384,10 @@ def heart_dimensions(
     ``n_terminals``).
     """
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    tissue, d = _build(n_terminals, voxel_size, mass_g, density, exclude_cavities=False, ostium_height=ostium_height)
+    shape = _check_shape(base_cut, elongation)
+    tissue, d = _build(
+        n_terminals, voxel_size, mass_g, density, exclude_cavities=False, ostium_height=ostium_height, shape=shape
+    )
     achieved = tissue.measure * density * 1e3
     d.update(
         voxel_size=float(tissue.voxel_size),
@@ -355,6 +408,8 @@ def heart_tissue(
     q_required: float | None = None,
     total_flow: float | None = None,
     ostium_height: float | None = None,
+    base_cut: float | None = None,
+    elongation: float | None = None,
     **_,
 ) -> Tissue:
     """The coronary substrate (LV + RV myocardium) with the LCA and RCA ostia as inlets.
@@ -367,11 +422,14 @@ def heart_tissue(
     the myocardium only (cavities then cost nothing to cross; the model before 2026-11).
     ``ostium_height`` [m] places both ostia that far above the base plane on the aortic
     root's wall (default: the reference heart's 5 mm, scaled: 5.8 mm at 218 g).
+    ``base_cut`` (in [0, 0.7]; default 1/3) and ``elongation`` (in [0.5, 2]; default 1)
+    reshape the reference heart before it is scaled to ``mass_g`` (module docstring).
     Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
     """
     voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
+    shape = _check_shape(base_cut, elongation)
     tissue, d = _build(
-        n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height
+        n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height, shape
     )
     achieved = tissue.measure * density * 1e3
     log.info(
