@@ -348,14 +348,15 @@ def _check_shape(base_cut, elongation) -> tuple:
     return tuple(shape)
 
 
-def _validate(n_terminals, voxel_size, mass_g, density) -> tuple[float | None, float, float]:
+def _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation) -> tuple:
+    """(voxel_size, mass_g, density, shape) checked, each error naming its field."""
     mass_g = _check_positive("mass_g", mass_g, "myocardial mass in grams, > 0")
     density = _check_positive("density", density, "myocardial density in kg m^-3, > 0")
     if voxel_size is not None:
         voxel_size = _check_positive("voxel_size", voxel_size, "voxel edge in metres, > 0")
     if isinstance(n_terminals, bool) or not isinstance(n_terminals, numbers.Integral) or n_terminals < 1:
         raise TissueError(f"n_terminals must be a positive integer, got {n_terminals!r}")
-    return voxel_size, mass_g, density
+    return voxel_size, mass_g, density, _check_shape(base_cut, elongation)
 
 
 def heart_dimensions(
@@ -383,8 +384,7 @@ def heart_dimensions(
     achieved mass of the voxel map at ``voxel_size`` (default: R_supply / 4 for
     ``n_terminals``).
     """
-    voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    shape = _check_shape(base_cut, elongation)
+    voxel_size, mass_g, density, shape = _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation)
     tissue, d = _build(
         n_terminals, voxel_size, mass_g, density, exclude_cavities=False, ostium_height=ostium_height, shape=shape
     )
@@ -426,8 +426,7 @@ def heart_tissue(
     reshape the reference heart before it is scaled to ``mass_g`` (module docstring).
     Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
     """
-    voxel_size, mass_g, density = _validate(n_terminals, voxel_size, mass_g, density)
-    shape = _check_shape(base_cut, elongation)
+    voxel_size, mass_g, density, shape = _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation)
     tissue, d = _build(
         n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height, shape
     )
