@@ -241,14 +241,12 @@ def test_ostium_height_places_both_ostia_above_the_base_in_metres(dims):
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["tissue.ostium_height=-0.001"], r"tissue.ostium_height must be a height .* in \[0, 0.05\]"),
-        (["tissue.ostium_height=0.2"], "tissue.ostium_height must be"),
         (["tissue=sphere", "tissue.ostium_height=0.01"], "tissue=sphere is not the heart"),
         (["tissue=box", "tissue.base_cut=0.2"], r"tissue.base_cut shapes the heart; tissue=box is not the heart"),
         (["tissue=plane2d", "tissue.elongation=1.2"], "tissue.elongation shapes the heart"),
     ],
 )
-def test_bad_ostium_height_is_refused_naming_the_field(overrides, message):
+def test_heart_options_on_other_tissues_are_refused_naming_the_field(overrides, message):
     with pytest.raises(ConfigError, match=message):
         validate(to_run_config(compose(overrides)))
 
@@ -298,9 +296,11 @@ def test_unset_shape_is_the_reference_heart(tissue1000):
         ("base_cut", 0.8, "tissue.base_cut must be"),
         ("elongation", 0.3, r"tissue.elongation must be .* in \[0.5, 2.0\]"),
         ("elongation", "long", "tissue.elongation must be"),
+        ("ostium_height", -0.001, r"tissue.ostium_height must be a height .* in \[0.0, 0.05\]"),
+        ("ostium_height", 0.2, "tissue.ostium_height must be"),
     ],
 )
-def test_bad_shape_is_refused_before_any_job(tmp_path, key, value, message):
+def test_bad_heart_options_are_refused_before_any_job(tmp_path, key, value, message):
     with pytest.raises(TissueError, match=message):
         heart.heart_tissue(300, **{key: value})
     if isinstance(value, float):  # and by the command's planning, before anything is written

@@ -49,7 +49,6 @@ PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps 
 # (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
 MAX_STEPS = 10**15
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
-MAX_OSTIUM_HEIGHT = 0.05  # m: half the heart's length; higher, the aortic root is not on this heart
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
@@ -315,13 +314,6 @@ def validate(cfg: RunConfig) -> RunConfig:
     ):
         if getattr(cfg.tissue, key) is not None and cfg.tissue.name != "heart":
             raise ConfigError(f"tissue.{key} {what}; tissue={cfg.tissue.name} is not the heart: leave it unset (null)")
-    ostium = cfg.tissue.ostium_height
-    if ostium is not None:
-        if not 0.0 <= ostium <= MAX_OSTIUM_HEIGHT:
-            raise ConfigError(
-                f"tissue.ostium_height must be a height above the heart's base plane in metres, in "
-                f"[0, {MAX_OSTIUM_HEIGHT}], or null (5.8 mm at 218 g), got {ostium}"
-            )
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))

@@ -85,6 +85,7 @@ MARGIN_FRACTION = 0.12  # grid margin around the heart, fraction of its largest 
 # a sphere, 2 twice the reference's length-to-width ratio.
 BASE_CUT_RANGE = (0.0, 0.7)
 ELONGATION_RANGE = (0.5, 2.0)
+OSTIUM_HEIGHT_RANGE = (0.0, 0.05)  # m: half the heart's length; higher, the aortic root is not on this heart
 
 # Unscaled reference geometry [m] (see the module docstring).
 _CM = 1e-2
@@ -332,10 +333,11 @@ def _build(
     return tissue, d
 
 
-def _check_shape(base_cut, elongation) -> tuple:
-    """(base_cut, elongation) as floats or None, each in its range (TissueError naming it)."""
-    shape = []
+def _check_options(ostium_height, base_cut, elongation) -> tuple:
+    """(ostium_height, (base_cut, elongation)) as floats or None, each in its range (TissueError naming it)."""
+    checked = []
     for field, value, (low, high), what in (
+        ("ostium_height", ostium_height, OSTIUM_HEIGHT_RANGE, "a height above the heart's base plane in metres"),
         ("base_cut", base_cut, BASE_CUT_RANGE, "the base plane's height above the LV's equator, in LV half-lengths"),
         ("elongation", elongation, ELONGATION_RANGE, "the factor on the ventricles' long-axis dimensions"),
     ):
@@ -344,19 +346,19 @@ def _check_shape(base_cut, elongation) -> tuple:
             if not ok:
                 raise TissueError(f"tissue.{field} must be {what}, in [{low}, {high}], or null, got {value!r}")
             value = float(value)
-        shape.append(value)
-    return tuple(shape)
+        checked.append(value)
+    return checked[0], tuple(checked[1:])
 
 
-def _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation) -> tuple:
-    """(voxel_size, mass_g, density, shape) checked, each error naming its field."""
+def _validate(n_terminals, voxel_size, mass_g, density, ostium_height, base_cut, elongation) -> tuple:
+    """(voxel_size, mass_g, density, ostium_height, shape) checked, each error naming its field."""
     mass_g = _check_positive("mass_g", mass_g, "myocardial mass in grams, > 0")
     density = _check_positive("density", density, "myocardial density in kg m^-3, > 0")
     if voxel_size is not None:
         voxel_size = _check_positive("voxel_size", voxel_size, "voxel edge in metres, > 0")
     if isinstance(n_terminals, bool) or not isinstance(n_terminals, numbers.Integral) or n_terminals < 1:
         raise TissueError(f"n_terminals must be a positive integer, got {n_terminals!r}")
-    return voxel_size, mass_g, density, _check_shape(base_cut, elongation)
+    return (voxel_size, mass_g, density, *_check_options(ostium_height, base_cut, elongation))
 
 
 def heart_dimensions(
@@ -384,7 +386,9 @@ def heart_dimensions(
     achieved mass of the voxel map at ``voxel_size`` (default: R_supply / 4 for
     ``n_terminals``).
     """
-    voxel_size, mass_g, density, shape = _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation)
+    voxel_size, mass_g, density, ostium_height, shape = _validate(
+        n_terminals, voxel_size, mass_g, density, ostium_height, base_cut, elongation
+    )
     tissue, d = _build(
         n_terminals, voxel_size, mass_g, density, exclude_cavities=False, ostium_height=ostium_height, shape=shape
     )
@@ -420,13 +424,15 @@ def heart_tissue(
     exclusion domain is the myocardium plus the ventricular cavities closed at the base
     plane ("vessels may not penetrate the ventricles"), or with ``exclude_cavities=False``
     the myocardium only (cavities then cost nothing to cross; the model before 2026-11).
-    ``ostium_height`` [m] places both ostia that far above the base plane on the aortic
-    root's wall (default: the reference heart's 5 mm, scaled: 5.8 mm at 218 g).
+    ``ostium_height`` [m, in [0, 0.05]] places both ostia that far above the base plane on
+    the aortic root's wall (default: the reference heart's 5 mm, scaled: 5.8 mm at 218 g).
     ``base_cut`` (in [0, 0.7]; default 1/3) and ``elongation`` (in [0.5, 2]; default 1)
     reshape the reference heart before it is scaled to ``mass_g`` (module docstring).
     Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
     """
-    voxel_size, mass_g, density, shape = _validate(n_terminals, voxel_size, mass_g, density, base_cut, elongation)
+    voxel_size, mass_g, density, ostium_height, shape = _validate(
+        n_terminals, voxel_size, mass_g, density, ostium_height, base_cut, elongation
+    )
     tissue, d = _build(
         n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height, shape
     )
