@@ -197,21 +197,28 @@ def _distance3(a, b):
     return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@jit_norc
+@jit_norc_inline
 def segment_exclusion(model, p0, p1):
     """sum_v (D_v L_v)^6 over voxels crossed by p0 -> p1 (exact Amanatides-Woo traversal).
 
     Voxel coordinates put voxel centres at integers; the segment is clipped to the grid.
     """
-    dist = model.distance
+    o = model.origin
+    return _traverse(model.distance, o[0], o[1], o[2], model.voxel_size, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2])
+
+
+@jit_norc
+def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
+    """:func:`segment_exclusion` on scalars: a call passes a few words, not the whole ``Model``
+    (numba passes a named tuple field by field, each array as its full descriptor)."""
     nz, ny, nx = dist.shape
-    h = model.voxel_size
-    ux = (p0[0] - model.origin[0]) / h
-    uy = (p0[1] - model.origin[1]) / h
-    uz = (p0[2] - model.origin[2]) / h
-    dx = (p1[0] - model.origin[0]) / h - ux
-    dy = (p1[1] - model.origin[1]) / h - uy
-    dz = (p1[2] - model.origin[2]) / h - uz
+    flat = dist.reshape(-1)
+    ux = (p0x - ox) / h
+    uy = (p0y - oy) / h
+    uz = (p0z - oz) / h
+    dx = (p1x - ox) / h - ux
+    dy = (p1y - oy) / h - uy
+    dz = (p1z - oz) / h - uz
     length = math.sqrt(dx * dx + dy * dy + dz * dz)
     if length == 0.0:
         return 0.0
@@ -247,11 +254,17 @@ def segment_exclusion(model, p0, p1):
     tx = (ix + 0.5 * sx - ux) * rx if dx != 0.0 else np.inf
     ty = (iy + 0.5 * sy - uy) * ry if dy != 0.0 else np.inf
     tz = (iz + 0.5 * sz - uz) * rz if dz != 0.0 else np.inf
+    # The flat index is stepped by strides (unsigned: no negative-index wrap-around); the
+    # per-axis indices only check the grid's bounds.
+    idx = np.uint64((iz * ny + iy) * nx + ix)
+    stride_x = np.uint64(1) if sx > 0 else np.uint64(-1)
+    stride_y = np.uint64(nx) if sy > 0 else np.uint64(-nx)
+    stride_z = np.uint64(nx * ny) if sz > 0 else np.uint64(-nx * ny)
     t = t0
     acc = 0.0
     while True:
         tn = min(tx, ty, tz, t1)
-        depth = dist[iz, iy, ix]
+        depth = flat[idx]
         if depth > 0.0 and tn > t:
             x = depth * ((tn - t) * length)
             x3 = x * x * x
@@ -262,16 +275,19 @@ def segment_exclusion(model, p0, p1):
             ix += sx
             if ix < 0 or ix >= nx:
                 break
+            idx += stride_x
             tx = (ix + 0.5 * sx - ux) * rx
         elif ty <= tz:
             iy += sy
             if iy < 0 or iy >= ny:
                 break
+            idx += stride_y
             ty = (iy + 0.5 * sy - uy) * ry
         else:
             iz += sz
             if iz < 0 or iz >= nz:
                 break
+            idx += stride_z
             tz = (iz + 0.5 * sz - uz) * rz
         t = tn
     return acc
@@ -388,20 +404,26 @@ def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
     )
 
 
-@jit_norc
+@jit_norc_inline
 def _sphere_change(model, supply, old, new, write):
     """Change of C_s when a supply sphere moves from ``old`` to ``new`` (either may be NaN: absent).
 
     Only voxels in one sphere but not the other change; with ``write`` the counts are
     updated. ``supply`` holds -1 outside tissue.
     """
+    ox, oy, oz = _voxel_coords(model, old[0], old[1], old[2])  # NaN stays NaN: absent
+    nx_, ny_, nz_ = _voxel_coords(model, new[0], new[1], new[2])
+    return _sphere_rows(supply, model.supply_rho, ox, oy, oz, nx_, ny_, nz_, write)
+
+
+@jit_norc
+def _sphere_rows(supply, rho, ox, oy, oz, nx_, ny_, nz_, write):
+    """:func:`_sphere_change` on the spheres' centres in voxel coordinates: a call passes a
+    few words, not the whole ``Model`` (numba passes a named tuple field by field)."""
     nz, ny, nx = supply.shape
-    rho = model.supply_rho
     rho2 = rho * rho
-    has_old = not math.isnan(old[0])
-    has_new = not math.isnan(new[0])
-    ox, oy, oz = _voxel_coords(model, old[0], old[1], old[2]) if has_old else (np.nan, np.nan, np.nan)
-    nx_, ny_, nz_ = _voxel_coords(model, new[0], new[1], new[2]) if has_new else (np.nan, np.nan, np.nan)
+    has_old = not math.isnan(ox)
+    has_new = not math.isnan(nx_)
     z_lo = nz
     z_hi = -1
     if has_old:
