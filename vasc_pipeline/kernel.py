@@ -670,6 +670,18 @@ def _early_reject(lower_bound, temp, rng):
 
 
 @jit_norc_inline
+def _reject_on_bound(lower_bound, temp, rng, u):
+    """:func:`_early_reject` again with a tighter bound, once some of the costly terms are
+    known: u is drawn now only if it was not (``u`` < 0) and the bound is uphill.
+    Returns (rejected, u)."""
+    if lower_bound <= 0.0:
+        return False, u
+    if u < 0.0:
+        u = next_double(rng)
+    return u >= math.exp(-lower_bound / temp), u
+
+
+@jit_norc_inline
 def _accept_with(d_cost, temp, rng, u):
     """:func:`_accept`, reusing the uniform ``u`` when :func:`_early_reject` drew one."""
     if d_cost <= 0.0:
@@ -813,7 +825,8 @@ def _translate_node(model, state, i, new, temp):
     The moved node's own segment (to its parent p) and, for a bifurcation, its children's
     segments (c0, c1) change length; n does not change. Cheap terms first: unless
     ``model.early_reject`` is off, the exclusion traversals are skipped when a lower bound
-    of ΔC (new segments' exclusion taken as 0) already fails Metropolis.
+    of ΔC (new segments' exclusion taken as 0) already fails Metropolis, and the children's
+    when the bound with the moved node's own segment fails.
     """
     rng = state.rng
     pos = state.position
@@ -860,6 +873,11 @@ def _translate_node(model, state, i, new, temp):
         exc_i = segment_exclusion(model, new, pos[p])
         d_exc = _exclusion_cost(model, state.n_downstream[i], exc_i)
         if not is_terminal:
+            if model.early_reject and not model.pressure_on:  # the children's exclusion still taken as 0
+                bound = weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, w_sup, d_sup)
+                rejected, u = _reject_on_bound(bound, temp, rng, u)
+                if rejected:
+                    return REJECTED
             exc_c0 = segment_exclusion(model, pos[c0], new)
             exc_c1 = segment_exclusion(model, pos[c1], new)
             d_exc += _exclusion_cost(model, state.n_downstream[c0], exc_c0) + _exclusion_cost(
@@ -1057,6 +1075,13 @@ def _swap_nodes(model, state, a, b, temp):
     new_exc_b = 0.0
     if model.exclusion_on:
         new_exc_a = segment_exclusion(model, pos[a], pos[pb])
+        if model.early_reject and not model.pressure_on:  # b's new exclusion still taken as 0
+            bound = weighted_total(
+                model, d_vol + d_pow, d_exc + (_exclusion_cost(model, na, new_exc_a) - old_exc), 0.0, 0.0, 0.0
+            )
+            rejected, u = _reject_on_bound(bound, temp, rng, u)
+            if rejected:
+                return REJECTED
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
         d_exc += (_exclusion_cost(model, na, new_exc_a) + _exclusion_cost(model, nb, new_exc_b)) - old_exc
     # pressure (recomputed in full on the tentatively swapped tree)
