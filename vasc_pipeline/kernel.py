@@ -254,8 +254,9 @@ def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
     tx = (ix + 0.5 * sx - ux) * rx if dx != 0.0 else np.inf
     ty = (iy + 0.5 * sy - uy) * ry if dy != 0.0 else np.inf
     tz = (iz + 0.5 * sz - uz) * rz if dz != 0.0 else np.inf
-    # The flat index is stepped by strides (unsigned: no negative-index wrap-around); the
-    # per-axis indices only check the grid's bounds.
+    # The flat index is stepped by strides; the per-axis indices check the grid's bounds
+    # before it moves, so it never leaves the map. Unsigned, so that numba adds no
+    # negative-index fix-up to each load; a backward stride is the modulo-2^64 negative.
     idx = np.uint64((iz * ny + iy) * nx + ix)
     stride_x = np.uint64(1) if sx > 0 else np.uint64(-1)
     stride_y = np.uint64(nx) if sy > 0 else np.uint64(-nx)
