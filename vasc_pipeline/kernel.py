@@ -656,25 +656,16 @@ def _accept(d_cost, temp, rng):
 
 
 @jit_norc_inline
-def _early_reject(lower_bound, temp, rng):
-    """Metropolis on a lower bound of ΔC, before the costly terms are evaluated.
+def _early_reject(lower_bound, temp, rng, u):
+    """Metropolis on a lower bound of ΔC, before (all of) the costly terms are evaluated.
 
-    Returns (rejected, u): if the bound is uphill the uniform u is drawn now (the full
-    test would draw it too, since ΔC >= bound > 0) and the move is rejected when even
-    the bound fails; otherwise u = -1 (not drawn). The decision then equals the full
-    test's with the same u, so the random stream is unchanged by the shortcut.
+    ``u``: the uniform an earlier check of the same move drew, or -1 (none yet). Returns
+    (rejected, u): if the bound is uphill and no uniform was drawn, u is drawn now (the
+    full test would draw it too, since ΔC >= bound > 0), and the move is rejected when
+    even the bound fails; otherwise u is returned as given. The decision then equals the
+    full test's with the same u, so the random stream is unchanged by the shortcut; a move
+    may be checked again as its bound tightens.
     """
-    if lower_bound <= 0.0:
-        return False, -1.0
-    u = next_double(rng)
-    return u >= math.exp(-lower_bound / temp), u
-
-
-@jit_norc_inline
-def _reject_on_bound(lower_bound, temp, rng, u):
-    """:func:`_early_reject` again with a tighter bound, once some of the costly terms are
-    known: u is drawn now only if it was not (``u`` < 0) and the bound is uphill.
-    Returns (rejected, u)."""
     if lower_bound <= 0.0:
         return False, u
     if u < 0.0:
@@ -862,7 +853,7 @@ def _translate_node(model, state, i, new, temp):
     u = -1.0
     if model.early_reject and not model.pressure_on:
         bound = weighted_total(model, d_vol + d_pow, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
-        rejected, u = _early_reject(bound, temp, rng)
+        rejected, u = _early_reject(bound, temp, rng, -1.0)
         if rejected:
             return REJECTED
     # exclusion
@@ -876,7 +867,7 @@ def _translate_node(model, state, i, new, temp):
         if not is_terminal:
             if model.early_reject and not model.pressure_on:  # the children's exclusion still taken as 0
                 bound = weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, w_sup, d_sup)
-                rejected, u = _reject_on_bound(bound, temp, rng, u)
+                rejected, u = _early_reject(bound, temp, rng, u)
                 if rejected:
                     return REJECTED
             exc_c0 = segment_exclusion(model, pos[c0], new)
@@ -1068,7 +1059,9 @@ def _swap_nodes(model, state, a, b, temp):
     # early rejection on a lower bound (new segments' exclusion taken as 0)
     u = -1.0
     if model.early_reject and not model.pressure_on:
-        rejected, u = _early_reject(weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, 0.0, 0.0), temp, rng)
+        rejected, u = _early_reject(
+            weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, 0.0, 0.0), temp, rng, -1.0
+        )
         if rejected:
             return REJECTED
     # exclusion
@@ -1080,7 +1073,7 @@ def _swap_nodes(model, state, a, b, temp):
             bound = weighted_total(
                 model, d_vol + d_pow, d_exc + (_exclusion_cost(model, na, new_exc_a) - old_exc), 0.0, 0.0, 0.0
             )
-            rejected, u = _reject_on_bound(bound, temp, rng, u)
+            rejected, u = _early_reject(bound, temp, rng, u)
             if rejected:
                 return REJECTED
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
