@@ -1069,15 +1069,14 @@ def _swap_nodes(model, state, a, b, temp):
     new_exc_b = 0.0
     if model.exclusion_on:
         new_exc_a = segment_exclusion(model, pos[a], pos[pb])
+        cost_a = _exclusion_cost(model, na, new_exc_a)
         if model.early_reject and not model.pressure_on:  # b's new exclusion still taken as 0
-            bound = weighted_total(
-                model, d_vol + d_pow, d_exc + (_exclusion_cost(model, na, new_exc_a) - old_exc), 0.0, 0.0, 0.0
-            )
+            bound = weighted_total(model, d_vol + d_pow, d_exc + (cost_a - old_exc), 0.0, 0.0, 0.0)
             rejected, u = _early_reject(bound, temp, rng, u)
             if rejected:
                 return REJECTED
         new_exc_b = segment_exclusion(model, pos[b], pos[pa])
-        d_exc += (_exclusion_cost(model, na, new_exc_a) + _exclusion_cost(model, nb, new_exc_b)) - old_exc
+        d_exc += (cost_a + _exclusion_cost(model, nb, new_exc_b)) - old_exc
     # pressure (recomputed in full on the tentatively swapped tree)
     d_pre = 0.0
     new_pressure = 0.0
