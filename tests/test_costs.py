@@ -75,6 +75,64 @@ def test_segment_outside_tissue_costs_nothing(sphere_problem):
     assert kernel.segment_exclusion(model, np.array([-0.01, 0, 0]), np.array([0.01, 0, 0])) > 0
 
 
+def test_leap_map_marks_exactly_the_blocks_without_domain_voxels():
+    rs = np.random.default_rng(3)
+    distance = np.zeros((21, 40, 35), dtype=np.float32)
+    for z, y, x in rs.integers(0, (21, 40, 35), (6, 3)):
+        distance[z, y, x] = rs.uniform(0.5, 3.0)
+    leap = kernel.leap_map(distance)
+    b = kernel.LEAP_BLOCK
+    for z, y, x in np.ndindex(distance.shape):
+        if distance[z, y, x] > 0:
+            assert leap[z, y, x] == distance[z, y, x]
+        else:
+            corner = np.array([z, y, x]) // b * b
+            block = distance[tuple(slice(c, c + b) for c in corner)]
+            assert leap[z, y, x] == (0.0 if (block > 0).any() else -1.0)
+    assert (leap < 0).any() and (leap == 0).any()
+
+
+def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_problem):
+    """Leaps over empty blocks must land where the voxel-by-voxel walk would, crossings and ties
+    included: the sums over the leap map and over the plain map must be the same float."""
+    from scipy import ndimage
+
+    # Two balls of domain in a grid that is mostly empty blocks.
+    z, y, x = np.indices((40, 70, 90))
+    ball_a = (x - 20) ** 2 + (y - 30) ** 2 + (z - 20) ** 2 < 100
+    ball_b = (x - 70) ** 2 + (y - 50) ** 2 + (z - 15) ** 2 < 50
+    domain = ball_a | ball_b
+    distance = ndimage.distance_transform_edt(domain).astype(np.float32)
+    h = 1e-3
+    origin = np.array([0.01, -0.02, 0.005])
+    plain = sphere_problem.model._replace(distance=distance, origin=origin, voxel_size=h)
+    leap = plain._replace(distance=kernel.leap_map(distance))
+    assert (leap.distance < 0).mean() > 0.5
+    rs = np.random.default_rng(4)
+    lo, hi = origin - 3 * h, origin + (np.array([90, 70, 40]) + 2) * h
+    starts = rs.uniform(lo, hi, (3000, 3))
+    steps = rs.integers(-60, 61, (3000, 3)).astype(float)
+    steps[::4, 1] = steps[::4, 0]  # diagonals through block corners
+    steps[1::4, 1:] = 0.0  # axis-parallel
+    on_faces = np.round((starts - origin) / h * 2) / 2 * h + origin  # endpoints on voxel faces / centres
+    cases = [(starts, rs.uniform(lo, hi, (3000, 3))), (starts, starts + rs.normal(0, 8 * h, (3000, 3)))]
+    cases += [(on_faces, on_faces + steps * h), (on_faces, on_faces + np.abs(steps[:, :1]) * h * np.array([1, -1, 1]))]
+    n_nonzero = 0
+    for p0s, p1s in cases:
+        for p0, p1 in zip(p0s, p1s):
+            for a, b in ((p0, p1), (p1, p0)):
+                got = kernel.segment_exclusion(leap, a, b)
+                assert got == kernel.segment_exclusion(plain, a, b)
+                n_nonzero += got > 0
+    assert n_nonzero > 1000  # the segments reach the domain, not only empty space
+    # And the leap map's sums are the NumPy twin's (which knows nothing of leaps).
+    for p0, p1 in zip(starts[:200], starts[200:400]):
+        u0, u1 = (p0 - origin) / h, (p1 - origin) / h
+        idx, pieces = costs.voxel_pieces(u0, u1, distance.shape)
+        expected = float(np.sum((distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64) * pieces) ** 6))
+        assert kernel.segment_exclusion(leap, p0, p1) == pytest.approx(expected, rel=1e-12, abs=1e-300)
+
+
 def test_supply_spheres_match_brute_force_voxel_for_voxel(sphere_problem):
     problem = sphere_problem
     state = engine.initial_state(problem, seed=5)

@@ -35,7 +35,7 @@ Model = namedtuple(
         "n_terminals",
         "tables",  # float64 (5, N + 1): volume, power, exclusion, resistance, flow factors by n
         "mask",  # uint8 (nz, ny, nx)
-        "distance",  # float32 (nz, ny, nx), voxel units
+        "distance",  # float32 (nz, ny, nx): exclusion depth in voxel units; <= 0 outside (see leap_map)
         "origin",  # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
         "voxel_size",  # float, m
         "box_lo",
@@ -197,6 +197,30 @@ def _distance3(a, b):
     return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
+# Side of the grid-aligned blocks the traversal leaps over (a power of two).
+LEAP_BLOCK = 16
+_BLOCK_MASK = LEAP_BLOCK - 1
+
+
+def leap_map(distance):
+    """The exclusion distance map as the traversal reads it: the depth inside the domain; outside
+    it -1 where the voxel's block (``LEAP_BLOCK`` voxels a side, aligned with the grid) holds no
+    domain voxel, else 0. The walk leaps over such a block instead of visiting its voxels, which
+    add nothing to the sum (in the first half of a heart run, a quarter to a half of the voxels a
+    segment crosses). Blocks of 16 measured faster than 8 (more leaps, each ~30 ns of dependent
+    arithmetic) and 32 (fewer empty blocks)."""
+    distance = np.asarray(distance, dtype=np.float32)
+    inside = distance > 0.0
+    padded_shape = tuple(-(-n // LEAP_BLOCK) * LEAP_BLOCK for n in distance.shape)
+    padded = np.zeros(padded_shape, dtype=bool)
+    padded[tuple(slice(0, n) for n in distance.shape)] = inside
+    nb = [n // LEAP_BLOCK for n in padded_shape]
+    occupied = padded.reshape(nb[0], LEAP_BLOCK, nb[1], LEAP_BLOCK, nb[2], LEAP_BLOCK).any(axis=(1, 3, 5))
+    occupied = occupied.repeat(LEAP_BLOCK, 0).repeat(LEAP_BLOCK, 1).repeat(LEAP_BLOCK, 2)
+    occupied = occupied[tuple(slice(0, n) for n in distance.shape)]
+    return np.where(inside, distance, np.where(occupied, 0.0, -1.0)).astype(np.float32)
+
+
 @jit_norc_inline
 def segment_exclusion(model, p0, p1):
     """sum_v (D_v L_v)^6 over voxels crossed by p0 -> p1 (exact Amanatides-Woo traversal).
@@ -266,10 +290,42 @@ def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
     while True:
         tn = min(tx, ty, tz, t1)
         depth = flat[idx]
-        if depth > 0.0 and tn > t:
-            x = depth * ((tn - t) * length)
-            x3 = x * x * x
-            acc += x3 * x3
+        if depth > 0.0:
+            if tn > t:
+                x = depth * ((tn - t) * length)
+                x3 = x * x * x
+                acc += x3 * x3
+        elif depth < 0.0:
+            # This voxel's block of the grid holds no domain voxel: its voxels add nothing, so
+            # leap to the first voxel past the block, in the state the walk would reach there.
+            # (The block's bounds follow from the indices alone: no wait on the load.)
+            lx = ix | _BLOCK_MASK if sx > 0 else ix & ~_BLOCK_MASK
+            ly = iy | _BLOCK_MASK if sy > 0 else iy & ~_BLOCK_MASK
+            lz = iz | _BLOCK_MASK if sz > 0 else iz & ~_BLOCK_MASK
+            ex = (lx + 0.5 * sx - ux) * rx if dx != 0.0 else np.inf
+            ey = (ly + 0.5 * sy - uy) * ry if dy != 0.0 else np.inf
+            ez = (lz + 0.5 * sz - uz) * rz if dz != 0.0 else np.inf
+            t_exit = min(ex, ey, ez)
+            if t_exit >= t1:
+                break
+            if dx != 0.0:
+                ix = _past_planes(ix, sx, lx, ux, dx, rx, t_exit, ex == t_exit)
+                if ix < 0 or ix >= nx:
+                    break
+                tx = (ix + 0.5 * sx - ux) * rx
+            if dy != 0.0:
+                iy = _past_planes(iy, sy, ly, uy, dy, ry, t_exit, ey == t_exit)
+                if iy < 0 or iy >= ny:
+                    break
+                ty = (iy + 0.5 * sy - uy) * ry
+            if dz != 0.0:
+                iz = _past_planes(iz, sz, lz, uz, dz, rz, t_exit, ez == t_exit)
+                if iz < 0 or iz >= nz:
+                    break
+                tz = (iz + 0.5 * sz - uz) * rz
+            idx = np.uint64((iz * ny + iy) * nx + ix)
+            t = t_exit
+            continue
         if tn >= t1:
             break
         if tx <= ty and tx <= tz:
@@ -292,6 +348,22 @@ def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
             tz = (iz + 0.5 * sz - uz) * rz
         t = tn
     return acc
+
+
+@jit_norc_inline
+def _past_planes(i, s, last, u, d, r, t_exit, exits):
+    """The index on one axis once the walk from voxel i (step s) has crossed every plane at or
+    before t_exit, inside a block whose last index that way is ``last``: past it on the axis
+    the walk leaves the block by, a guess from the position on the others; then the walk's own
+    plane parameters decide, so that the result is the walk's to the bit."""
+    guess = math.floor(u + t_exit * d + 0.5)
+    guess = min(max(guess, i), last) if s > 0 else max(min(guess, i), last)
+    j = last + s if exits else guess
+    while (j + 0.5 * s - u) * r <= t_exit:
+        j += s
+    while j != i and (j - 0.5 * s - u) * r > t_exit:
+        j -= s
+    return j
 
 
 @jit_norc_inline
