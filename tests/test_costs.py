@@ -89,46 +89,82 @@ def test_leap_map_marks_exactly_the_blocks_without_domain_voxels():
             corner = np.array([z, y, x]) // b * b
             block = distance[tuple(slice(c, c + b) for c in corner)]
             assert leap[z, y, x] == (0.0 if (block > 0).any() else -1.0)
+    assert leap.dtype == np.float32 and leap.shape == distance.shape
     assert (leap < 0).any() and (leap == 0).any()
+    assert (kernel.leap_map(np.zeros((5, 5, 5))) == -1.0).all()
+    assert (kernel.leap_map(np.ones((5, 5, 5))) == 1.0).all()
 
 
-def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_problem):
-    """Leaps over empty blocks must land where the voxel-by-voxel walk would, crossings and ties
-    included: the sums over the leap map and over the plain map must be the same float."""
+def _two_balls(shape, centres, radii2):
     from scipy import ndimage
 
-    # Two balls of domain in a grid that is mostly empty blocks.
-    z, y, x = np.indices((40, 70, 90))
-    ball_a = (x - 20) ** 2 + (y - 30) ** 2 + (z - 20) ** 2 < 100
-    ball_b = (x - 70) ** 2 + (y - 50) ** 2 + (z - 15) ** 2 < 50
-    domain = ball_a | ball_b
-    distance = ndimage.distance_transform_edt(domain).astype(np.float32)
-    h = 1e-3
-    origin = np.array([0.01, -0.02, 0.005])
-    plain = sphere_problem.model._replace(distance=distance, origin=origin, voxel_size=h)
+    z, y, x = np.indices(shape)
+    domain = np.zeros(shape, dtype=bool)
+    for (cx, cy, cz), r2 in zip(centres, radii2):
+        domain |= (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2 < r2
+    return ndimage.distance_transform_edt(domain).astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    "distance",
+    [
+        _two_balls((40, 70, 90), [(20, 30, 20), (70, 50, 15)], [100, 50]),
+        _two_balls((1, 70, 90), [(20, 30, 0), (47, 31, 0)], [100, 3]),  # one z layer, a ball against block faces
+    ],
+    ids=["3d", "2d"],
+)
+def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_problem, distance):
+    """Leaps over empty blocks must land where the voxel-by-voxel walk would, crossings and ties
+    included: the sums over the leap map and over the plain map must be the same float. Voxel
+    size 1 and origin 0 make plane coordinates exact, so ties between axes really occur."""
+    plain = sphere_problem.model._replace(distance=distance, origin=np.zeros(3), voxel_size=1.0)
     leap = plain._replace(distance=kernel.leap_map(distance))
     assert (leap.distance < 0).mean() > 0.5
     rs = np.random.default_rng(4)
-    lo, hi = origin - 3 * h, origin + (np.array([90, 70, 40]) + 2) * h
-    starts = rs.uniform(lo, hi, (3000, 3))
-    steps = rs.integers(-60, 61, (3000, 3)).astype(float)
-    steps[::4, 1] = steps[::4, 0]  # diagonals through block corners
-    steps[1::4, 1:] = 0.0  # axis-parallel
-    on_faces = np.round((starts - origin) / h * 2) / 2 * h + origin  # endpoints on voxel faces / centres
-    cases = [(starts, rs.uniform(lo, hi, (3000, 3))), (starts, starts + rs.normal(0, 8 * h, (3000, 3)))]
-    cases += [(on_faces, on_faces + steps * h), (on_faces, on_faces + np.abs(steps[:, :1]) * h * np.array([1, -1, 1]))]
+    b = kernel.LEAP_BLOCK
+    size = np.array(distance.shape[::-1], dtype=float)
+    lo, hi = -3.0, size + 2.0
+    m = 3000
+    starts = rs.uniform(lo, hi, (m, 3))
+    on_faces = np.round(starts * 2) / 2  # endpoints on voxel faces and centres
+    corners = rs.integers(0, size // b + 2, (m, 3)) * b - 0.5  # block corners (exact plane crossings)
+    signs = rs.choice([-1.0, 1.0], (m, 3))
+    lengths = rs.integers(1, 70, (m, 1)).astype(float)
+    axis = np.eye(3)[rs.integers(0, 3, m)]  # along x, y or z
+    flat = distance.shape[0] == 1
+    if flat:
+        starts[:, 2] = on_faces[:, 2] = corners[:, 2] = 0.0
+        signs[:, 2] = 0.0
+        axis[:, 2] = 0.0
+    cases = [
+        (starts, rs.uniform(lo, hi, (m, 3)) * ([1, 1, 0] if flat else 1)),
+        (starts, starts + rs.normal(0, 8, (m, 3)) * ([1, 1, 0] if flat else 1)),
+        (on_faces, on_faces + lengths * axis),
+        (corners, corners + lengths * signs),  # diagonals through block corners
+        (on_faces, on_faces + lengths * signs),
+    ]
     n_nonzero = 0
     for p0s, p1s in cases:
         for p0, p1 in zip(p0s, p1s):
-            for a, b in ((p0, p1), (p1, p0)):
-                got = kernel.segment_exclusion(leap, a, b)
-                assert got == kernel.segment_exclusion(plain, a, b)
+            for a, c in ((p0, p1), (p1, p0)):
+                got = kernel.segment_exclusion(leap, a, c)
+                assert got == kernel.segment_exclusion(plain, a, c)
                 n_nonzero += got > 0
     assert n_nonzero > 1000  # the segments reach the domain, not only empty space
+    # A diagonal entering the grid exactly at a block's corner, in the clipped first voxel
+    # (where the clip's division and the walk's reciprocal can put the leap behind t).
+    corner_map = np.zeros((1, 48, 48), dtype=np.float32)
+    corner_map[0, 31, 47] = 2.0
+    p0, p1 = np.array([86.5, 70.5, 0.0]), np.array([10.5, -5.5, 0.0])
+    assert kernel.segment_exclusion(leap._replace(distance=kernel.leap_map(corner_map)), p0, p1) == (
+        kernel.segment_exclusion(plain._replace(distance=corner_map), p0, p1)
+    )
+    # A non-finite endpoint costs nothing, as in the walk (and does not leap forever).
+    assert kernel.segment_exclusion(leap, np.array([np.nan, 5.0, 0.0]), np.array([10.0, 5.0, 0.0])) == 0.0
+    assert kernel.segment_exclusion(leap, np.array([-np.inf, 5.0, 0.0]), np.array([10.0, 5.0, 0.0])) == 0.0
     # And the leap map's sums are the NumPy twin's (which knows nothing of leaps).
-    for p0, p1 in zip(starts[:200], starts[200:400]):
-        u0, u1 = (p0 - origin) / h, (p1 - origin) / h
-        idx, pieces = costs.voxel_pieces(u0, u1, distance.shape)
+    for p0, p1 in zip(cases[0][0][:200], cases[0][1][:200]):
+        idx, pieces = costs.voxel_pieces(p0, p1, distance.shape)
         expected = float(np.sum((distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64) * pieces) ** 6))
         assert kernel.segment_exclusion(leap, p0, p1) == pytest.approx(expected, rel=1e-12, abs=1e-300)
 
