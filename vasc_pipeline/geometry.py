@@ -19,7 +19,8 @@ are contracted (nodes joined by them move as one "cluster"), and an optimality c
 every contracted segment: a segment may stay at zero length only while the net pull of
 the rest of the tree on the side that would move is no larger than its weight (the
 subgradient condition). Violated segments are reopened and Newton resumes; segments that
-Newton drives to zero length are contracted. The Newton systems are tree-structured and
+Newton drives to zero length are contracted, and so, once a line search shows a kink, is
+every segment shorter than ``KINK_LENGTH`` of the fixed nodes' extent. The Newton systems are tree-structured and
 are factorised in children-first order, which creates no fill-in, so each is O(N).
 
 :mod:`vasc_pipeline.finish` applies the optimum to an annealed state (the polish);
@@ -360,7 +361,8 @@ def optimal_bifurcations(
         only clips rounding; a 2-D tissue's plane (lo[2] == hi[2]) is kept exactly.
     collapse_tol : float
         Segments shorter than this times the extent of the fixed nodes are contracted
-        (then kept only if the optimality check passes).
+        (then kept only if the optimality check passes); at a kink, those shorter than
+        ``KINK_LENGTH`` times it as well.
 
     Returns
     -------
