@@ -213,6 +213,30 @@ def test_contracting_at_the_first_sign_of_a_kink_reaches_the_same_optimum_in_far
     assert fast.iterations * 4 < plain.iterations
 
 
+@pytest.mark.parametrize("ndim", [2, 3])
+@pytest.mark.parametrize("flat", [False, True], ids=["spread", "fixed-nodes-in-a-plane"])
+def test_terminals_a_hair_apart_converge_without_contracting_and_reopening_forever(ndim, flat):
+    """Terminals in pairs 1e-6 of the extent apart (and, in ``flat``, every fixed node in
+    one plane, a line in 2-D): a segment the optimality check reopens must not be contracted
+    again at the next kink, nor a zero-length segment break the Newton system. Before that
+    was so, a third of such instances crashed (singular factor) or ran to the round cap."""
+    physics = _physics(21, ndim)
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        tree = _random_instance(21, ndim, rng)
+        for k in range(1, 21, 2):
+            d = rng.normal(size=3)
+            d[2:] = d[2:] if ndim == 3 else 0.0
+            tree.position[k + 1] = tree.position[k] + 5e-8 * d / np.linalg.norm(d)  # m, in a 5 cm box
+        if flat:
+            tree.position[tree.kind != KIND_BIFURCATION, 1] = 0.0
+        weights = geometry.vascular_weights(tree, physics)
+        res = geometry.optimal_bifurcations(tree, weights)
+        assert res.converged and res.iterations < 200
+        if seed < 2:
+            _assert_matches_scipy(tree, weights, res, rng)
+
+
 def _two_terminal_tree(inlet, a, b):
     """Inlet 0, terminals 1 and 2, bifurcation 3 (started off the optimum)."""
     parent = np.array([-1, 3, 3, 0])

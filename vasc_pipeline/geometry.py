@@ -264,7 +264,7 @@ KINK_STEP = 1e-3
 KINK_LENGTH = 1e-4
 
 
-def _newton(x, con, w, dim, scale, collapse_tol, max_iter, stall=20):
+def _newton(x, con, w, dim, scale, collapse_tol, max_iter, reopened, stall=20):
     """Damped Newton on the contracted objective. Returns (x, iterations, segments to contract).
 
     On a smooth problem Newton converges in a few iterations from the Weiszfeld start. A
@@ -273,18 +273,28 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, stall=20):
     the line search cuts the step below ``KINK_STEP`` or ``stall`` iterations pass without
     convergence, and the segments touching a free cluster that are shorter than
     ``KINK_LENGTH * scale`` (at least the shortest one) are returned for contraction (the
-    caller's optimality check reopens any that the optimum does not keep).
+    caller's optimality check reopens any that the optimum does not keep). Segments in
+    ``reopened`` (bool, per node) were reopened by that check: they are contracted only as
+    the shortest, since a short segment the optimum keeps would otherwise be contracted
+    and reopened round after round.
     """
     movable = (con.var[con.a] >= 0) | (con.var[con.b] >= 0)  # two fixed nodes may never merge
 
     def short_segments():
+        seg = con.seg[movable]
         length = np.linalg.norm(x[con.a] - x[con.b], axis=1)[movable]
-        return con.seg[movable][length <= max(length.min(), KINK_LENGTH * scale)]
+        return seg[((length <= KINK_LENGTH * scale) & ~reopened[seg]) | (length == length.min())]
 
     f = _objective(x, con, w)
     for it in range(max_iter):
         if con.free.size == 0:
             return x, it, None
+        # A segment of no measurable length has no direction (its w/L curvature is
+        # infinite): contract it, whatever its history.
+        length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
+        degenerate = (length <= 1e-14 * scale) & movable
+        if np.any(degenerate):
+            return x, it, con.seg[degenerate]
         if it >= stall:
             return x, it, short_segments()
         g, hess = _gradient_hessian(x, con, w, dim)
@@ -305,10 +315,39 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, stall=20):
                 return x, it, short_segments()
         x, f = trial, f_trial
         length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
-        short = (length < collapse_tol * scale) & movable
+        short = (length < collapse_tol * scale) & movable & ~reopened[con.seg]
         if np.any(short):
             return x, it + 1, con.seg[short]
     return x, max_iter, None
+
+
+def _push_off(x, side, unit, con, w, cost, push, scale):
+    """Move the nodes in ``side`` along ``unit`` as far as the cost keeps dropping.
+
+    A crude line search on a convex function: from ``push``, halve until the cost drops
+    (down to ~1e-6 of ``push``, where the drop is below rounding), then double while it
+    keeps dropping (up to ``scale``). Returns the new positions and their cost.
+    """
+    best, best_cost = x, cost
+    for _ in range(20):
+        trial = x.copy()
+        trial[side] += push * unit
+        trial_cost = _objective(trial, con, w)
+        if trial_cost < cost:
+            best, best_cost = trial, trial_cost
+            break
+        push *= 0.5
+    else:
+        return trial, trial_cost  # no measurable drop: a push this small is harmless
+    while push < scale:
+        push *= 2.0
+        trial = x.copy()
+        trial[side] += push * unit
+        trial_cost = _objective(trial, con, w)
+        if trial_cost >= best_cost:
+            break
+        best, best_cost = trial, trial_cost
+    return best, best_cost
 
 
 def _side_forces(x, parent, w, levels, con):
@@ -394,6 +433,7 @@ def optimal_bifurcations(
     iterations = 0
     converged = True
     collapsed = np.zeros(m, dtype=bool)
+    reopened = np.zeros(m, dtype=bool)
     if dim > 0 and np.any(free):
         x, iterations = _weiszfeld(x, parent, w, free, depth, scale, 30)
         seg = parent >= 0
@@ -403,7 +443,7 @@ def optimal_bifurcations(
         for _ in range(max_rounds):
             con = _Contraction(parent, levels, depth, fixed, collapsed)
             _spread(x, con)
-            x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton)
+            x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton, reopened)
             _spread(x, con)  # Newton moves only the clusters' top nodes
             iterations += its
             if short is not None:
@@ -422,17 +462,24 @@ def optimal_bifurcations(
                 break
             # Reopen the worst violated segment of each cluster; push its movable side off
             # along the pull so Newton starts on the side where the segment has length.
+            # A push of fixed length can overshoot a node closer than it (terminals a hair
+            # apart), or leave the reopened segment the shortest (collinear nodes, where
+            # Newton has no curvature to go on): either way the next round contracts a
+            # segment the check then reopens, round after round. Hence the line search.
             cand = idx[bad]
             order = np.argsort(-excess[bad])
             cand, dirs = cand[order], force[bad][order]
             _, first = np.unique(con.top[cand], return_index=True)
             cand, dirs = cand[first], dirs[first]
             collapsed[cand] = False
+            reopened[cand] = True
             split = _Contraction(parent, levels, depth, fixed, collapsed)
+            cost = _objective(x, split, w)
             for i, f in zip(cand, dirs):
                 # The side without a fixed node is the one the pull acts on.
-                side = i if split.n_fixed[i] == 0 else split.top[parent[i]]
-                x[split.top == side] += (1e-7 * scale / np.linalg.norm(f)) * f
+                side = split.top == (i if split.n_fixed[i] == 0 else split.top[parent[i]])
+                unit = f / np.linalg.norm(f)
+                x, cost = _push_off(x, side, unit, split, w, cost, 1e-7 * scale, scale)
     position = tree.position.copy()
     position[free] = centre + x[free] @ basis
     if bounds is not None:
