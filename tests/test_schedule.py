@@ -29,6 +29,8 @@ def cells_consistent(problem, state):
     cxyz = np.clip(np.floor((state.position - model.cell_lo) / model.cell_size).astype(int), 0, model.cell_shape - 1)
     expected = (cxyz[:, 2] * model.cell_shape[1] + cxyz[:, 1]) * model.cell_shape[0] + cxyz[:, 0]
     np.testing.assert_array_equal(state.cell_of[k:], expected[k:])
+    # The per-cell node counts that the partner draw reads follow the lists.
+    np.testing.assert_array_equal(state.scratch_cell_count, np.bincount(expected[k:], minlength=state.cell_head.size))
 
 
 @pytest.mark.parametrize(

@@ -364,6 +364,9 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.Sta
         scratch_mark=np.zeros(m, dtype=np.int64),
         scratch_stack=np.zeros(m, dtype=np.int64),
         scratch_pressure=np.zeros(m),
+        scratch_cell_count=np.bincount(
+            fields["cell_of"][fields["cell_of"] >= 0], minlength=int(np.prod(problem.model.cell_shape))
+        ).astype(np.int64),
     )
 
 

@@ -102,6 +102,7 @@ State = namedtuple(
         "scratch_mark",
         "scratch_stack",
         "scratch_pressure",
+        "scratch_cell_count",  # int64: nodes per neighbour cell (derived from cell_of, so never checkpointed)
     ],
 )
 
@@ -614,6 +615,7 @@ def _cell_of_point(model, p):
 
 @jit_norc_inline
 def _cell_insert(state, i, c):
+    state.scratch_cell_count[c] += 1
     head = state.cell_head[c]
     state.cell_next[i] = head
     state.cell_prev[i] = -1
@@ -626,6 +628,7 @@ def _cell_insert(state, i, c):
 @jit_norc_inline
 def _cell_remove(state, i):
     c = state.cell_of[i]
+    state.scratch_cell_count[c] -= 1
     nxt = state.cell_next[i]
     prv = state.cell_prev[i]
     if prv >= 0:
@@ -649,6 +652,7 @@ def _cell_update(model, state, i, p):
 def build_cells(model, state):
     """Fill the cell lists from the node positions (inlets are never swap partners)."""
     state.cell_head[:] = -1
+    state.scratch_cell_count[:] = 0
     state.cell_of[:] = -1
     state.cell_next[:] = -1
     state.cell_prev[:] = -1
@@ -662,27 +666,39 @@ def neighbour_partner(model, state, a, rng):
 
     The relation "in adjacent cells" is symmetric and a swap moves no node, so the forward
     and reverse proposals of a swap have the same probability: detailed balance holds.
+    The draw counts the candidates from the cells' node counts and walks only the list of
+    the cell that holds the drawn one, in the order a walk of every list would meet them.
     """
     ax, ay, az = _cell_coords(model, state.position[a])
     nx_, ny_, nz_ = model.cell_shape[0], model.cell_shape[1], model.cell_shape[2]
-    count = 0
-    pick = -1
-    for sweep in range(2):  # first count the candidates, then walk to the drawn one
-        if sweep == 1:
-            if count == 0:
-                return -1
-            pick = next_below(rng, count)
-            count = 0
-        for cz in range(max(az - 1, 0), min(az + 1, nz_ - 1) + 1):
-            for cy in range(max(ay - 1, 0), min(ay + 1, ny_ - 1) + 1):
-                for cx in range(max(ax - 1, 0), min(ax + 1, nx_ - 1) + 1):
-                    x = state.cell_head[(cz * ny_ + cy) * nx_ + cx]
-                    while x >= 0:
-                        if x != a:
-                            if count == pick:
-                                return x
-                            count += 1
-                        x = state.cell_next[x]
+    count = state.scratch_cell_count
+    z0, z1 = max(az - 1, 0), min(az + 1, nz_ - 1)
+    y0, y1 = max(ay - 1, 0), min(ay + 1, ny_ - 1)
+    x0, x1 = max(ax - 1, 0), min(ax + 1, nx_ - 1)
+    total = -1  # a itself, in its own cell
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                total += count[(cz * ny_ + cy) * nx_ + cx]
+    if total <= 0:
+        return -1
+    pick = next_below(rng, total)
+    own = state.cell_of[a]
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                c = (cz * ny_ + cy) * nx_ + cx
+                here = count[c] - (1 if c == own else 0)
+                if pick >= here:
+                    pick -= here
+                    continue
+                x = state.cell_head[c]
+                while x >= 0:
+                    if x != a:
+                        if pick == 0:
+                            return x
+                        pick -= 1
+                    x = state.cell_next[x]
     return -1
 
 
