@@ -5,8 +5,12 @@
 # ($PAPER_DIR/convergence.png). Rerunning resumes.
 source "$(dirname "$0")/_common.sh"
 STEPS="[10000,100000,1000000,10000000,100000000,1000000000]"
+# "fast" here is anneal=fast_v1: the default schedule when this study ran (anneal=fast until
+# 2026-11-25), frozen under that name so the study stays reproducible.
 for schedule in paper fast; do
-    run_sweep "convergence_$schedule" +sweep=convergence "anneal=$schedule" "sweep.steps=$STEPS"
+    preset=$schedule
+    [ "$schedule" = fast ] && preset=fast_v1
+    run_sweep "convergence_$schedule" +sweep=convergence "anneal=$preset" "sweep.steps=$STEPS"
     collect "convergence_$schedule"
 done
 "$PYTHON" -m vasc_pipeline.figures convergence "$PAPER_DIR/convergence.png" \
