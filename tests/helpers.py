@@ -19,6 +19,28 @@ def make_problem(*overrides: str):
     return engine.build_problem(config.compose(list(overrides)))
 
 
+# -- tree topology: a plain swap to compare the kernel's with ------------------------------
+
+
+def ancestors(parent, node):
+    """The nodes above ``node``, nearest first."""
+    out = []
+    node = parent[node]
+    while node >= 0:
+        out.append(node)
+        node = parent[node]
+    return out
+
+
+def reference_swap(parent, a, b):
+    """Plain-Python swap on a parent array; None where the swap is illegal."""
+    if a == b or parent[a] == parent[b] or b in ancestors(parent, a) or a in ancestors(parent, b):
+        return None
+    out = parent.copy()
+    out[a], out[b] = parent[b], parent[a]
+    return out
+
+
 # -- kernel states: running sums and move counters ------------------------------------------
 
 

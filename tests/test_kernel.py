@@ -2,7 +2,13 @@
 
 import numpy as np
 import pytest
-from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
+from helpers import (
+    ancestors,
+    assert_moves_of_every_kind_accepted_and_rejected,
+    assert_running_equals_full,
+    make_problem,
+    reference_swap,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -95,24 +101,6 @@ def test_same_config_and_seed_give_identical_trees_and_block_splits_are_bit_iden
 def small_problem():
     # Huge temperature: every legal proposal is accepted, so legality alone decides.
     return make_problem("tissue=box", "n_terminals=12", "anneal.T_start=1e300", "anneal.T_end=1e299", "anneal.steps=10")
-
-
-def ancestors(parent, node):
-    out = []
-    node = parent[node]
-    while node >= 0:
-        out.append(node)
-        node = parent[node]
-    return out
-
-
-def reference_swap(parent, a, b):
-    """Plain-Python swap on a parent array; None where the swap is illegal."""
-    if a == b or parent[a] == parent[b] or b in ancestors(parent, a) or a in ancestors(parent, b):
-        return None
-    out = parent.copy()
-    out[a], out[b] = parent[b], parent[a]
-    return out
 
 
 def test_swap_rejects_ancestors_and_siblings(small_problem):

@@ -5,7 +5,12 @@ import math
 
 import numpy as np
 import pytest
-from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
+from helpers import (
+    assert_moves_of_every_kind_accepted_and_rejected,
+    assert_running_equals_full,
+    make_problem,
+    reference_swap,
+)
 
 from vasc_pipeline import config, costs, engine, job, kernel, sweep, topology_search
 from vasc_pipeline.config import ConfigError
@@ -82,26 +87,6 @@ def test_neighbour_partner_is_uniform_over_the_adjacent_cells_and_symmetric():
         assert counts.min() > 0.6 * counts.mean()  # uniform: 200 expected draws each
 
 
-def _swap_neighbours(parent, k):
-    """Parent arrays one legal swap away: the parents of two non-inlet nodes exchanged, where
-    the two are neither siblings nor ancestor and descendant."""
-
-    def ancestors(x):
-        out = set()
-        while parent[x] >= 0:
-            x = parent[x]
-            out.add(x)
-        return out
-
-    up = [ancestors(x) for x in range(parent.size)]
-    for a in range(k, parent.size):
-        for b in range(a + 1, parent.size):
-            if parent[a] != parent[b] and a not in up[b] and b not in up[a]:
-                p = parent.copy()
-                p[a], p[b] = parent[b], parent[a]
-                yield p
-
-
 @pytest.mark.parametrize("partners", ["anneal.neighbour_cell=0.4", "anneal.p_local=0"], ids=["neighbours", "uniform"])
 def test_swaps_at_a_fixed_temperature_sample_the_boltzmann_distribution(partners):
     """Detailed balance of the swap move with its partner draws: swaps alone, at a constant
@@ -124,7 +109,8 @@ def test_swaps_at_a_fixed_temperature_sample_the_boltzmann_distribution(partners
         p = todo.pop()
         if p.tobytes() not in energies:
             energies[p.tobytes()] = energy(p)
-            todo.extend(_swap_neighbours(p, k))
+            pairs = ((a, b) for a in range(k, p.size) for b in range(a + 1, p.size))
+            todo.extend(q for q in (reference_swap(p, a, b) for a, b in pairs) if q is not None)
     e = np.array(list(energies.values()))
     temp = float(np.std(e))
     state.schedule[:] = temp  # T_start = T_end: a constant temperature
