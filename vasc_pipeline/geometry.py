@@ -285,16 +285,18 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, reopened, stall=20):
         length = np.linalg.norm(x[con.a] - x[con.b], axis=1)[movable]
         return seg[((length <= KINK_LENGTH * scale) & ~reopened[seg]) | (length == length.min())]
 
-    f = _objective(x, con, w)
-    for it in range(max_iter):
-        if con.free.size == 0:
-            return x, it, None
+    def degenerate(length):
         # A segment of no measurable length has no direction (its w/L curvature is
         # infinite): contract it, whatever its history.
-        length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
-        degenerate = (length <= 1e-14 * scale) & movable
-        if np.any(degenerate):
-            return x, it, con.seg[degenerate]
+        return (length <= 1e-14 * scale) & movable
+
+    if con.free.size == 0:
+        return x, 0, None
+    contract = degenerate(np.linalg.norm(x[con.a] - x[con.b], axis=1))
+    if np.any(contract):
+        return x, 0, con.seg[contract]
+    f = _objective(x, con, w)
+    for it in range(max_iter):
         if it >= stall:
             return x, it, short_segments()
         g, hess = _gradient_hessian(x, con, w, dim)
@@ -315,9 +317,9 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, reopened, stall=20):
                 return x, it, short_segments()
         x, f = trial, f_trial
         length = np.linalg.norm(x[con.a] - x[con.b], axis=1)
-        short = (length < collapse_tol * scale) & movable & ~reopened[con.seg]
-        if np.any(short):
-            return x, it + 1, con.seg[short]
+        contract = degenerate(length) | ((length < collapse_tol * scale) & movable & ~reopened[con.seg])
+        if np.any(contract):
+            return x, it + 1, con.seg[contract]
     return x, max_iter, None
 
 
@@ -328,22 +330,22 @@ def _push_off(x, side, unit, con, w, cost, push, scale):
     (down to ~1e-6 of ``push``, where the drop is below rounding), then double while it
     keeps dropping (up to ``scale``). Returns the new positions and their cost.
     """
-    best, best_cost = x, cost
-    for _ in range(20):
+
+    def pushed(by):
         trial = x.copy()
-        trial[side] += push * unit
-        trial_cost = _objective(trial, con, w)
-        if trial_cost < cost:
-            best, best_cost = trial, trial_cost
+        trial[side] += by * unit
+        return trial, _objective(trial, con, w)
+
+    for _ in range(20):
+        best, best_cost = pushed(push)
+        if best_cost < cost:
             break
         push *= 0.5
     else:
-        return trial, trial_cost  # no measurable drop: a push this small is harmless
+        return best, best_cost  # no measurable drop: a push this small is harmless
     while push < scale:
         push *= 2.0
-        trial = x.copy()
-        trial[side] += push * unit
-        trial_cost = _objective(trial, con, w)
+        trial, trial_cost = pushed(push)
         if trial_cost >= best_cost:
             break
         best, best_cost = trial, trial_cost
