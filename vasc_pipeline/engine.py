@@ -241,6 +241,12 @@ def initial_state(problem: Problem, seed: int) -> kernel.State:
     if region.size:  # tissue.bifurcation_reach: the initial bifurcations (children's means) moved into it
         bifurcations = slice(problem.model.n_inlets + problem.model.n_terminals, None)
         tree.position[bifurcations] = problem.tissue.move_into(region, tree.position[bifurcations])
+    return state_from_tree(problem, tree, rng)
+
+
+def state_from_tree(problem: Problem, tree: Tree, rng: np.ndarray) -> kernel.State:
+    """A kernel state on ``tree`` (legal for ``problem``) drawing from the generator state
+    ``rng``, with its caches and running sums filled and its schedule set or calibrated on it."""
     anneal = problem.config.anneal
     m = tree.n_nodes
     state = restore_state(

@@ -1,0 +1,212 @@
+"""Warm starts against the plain anneal at equal moves, on the heart (issue 12, deliverable 2).
+
+Each strategy spends the same number of proposals, ``--budget`` times the default of
+``anneal=fast`` at N, and ends with the same polish:
+
+- ``plain``: ``anneal=fast`` from the random initial tree (the reference);
+- ``split`` (coarse to fine): ``anneal=fast`` on N/2 terminals with a share
+  ``--coarse-share`` of the moves; every terminal then becomes a bifurcation whose two
+  terminals lie ``--offset`` R_supply(N) to either side along a random direction (both in
+  tissue), and the N-terminal tree is annealed with the remaining moves from a temperature
+  calibrated on it (``anneal.accept_start``, ``--fine`` overrides);
+- ``packed_cco``: the packing phase alone (supply only, terminal moves,
+  ``--packing-per-terminal`` proposals each), the CCO tree grown on the packed sites
+  (:func:`vasc_pipeline.cco.grow_tree`), then the tree annealed with the remaining moves,
+  the supply term at its true weight throughout (``anneal.supply_T_start=null``), so the
+  terminals keep their packing while the tree is searched.
+
+One JSON line per (strategy, N, seed): C_s, the vascular cost C_v + C_w + (A_o/A_wv) C_o [W],
+the wall seconds of each stage and the fine stage's calibrated T_start [W]. Results
+measured with it: README, "What was tried for fewer moves", and
+``benchmarks/results/warm_start_rows.jsonl``.
+
+    python benchmarks/warm_starts.py --sizes 1000 --budget 0.5 --seeds 0 1
+    python benchmarks/warm_starts.py --sizes 2000 --budget 0.25 --strategies packed_cco \\
+        --packing-per-terminal 30000 --fine anneal.accept_start=0.5
+    python benchmarks/warm_starts.py --quick                 # seconds: wiring only
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+
+import numpy as np
+
+STRATEGIES = ("plain", "split", "packed_cco")
+
+
+def problem_of(n: int, steps: int, overrides: list[str]):
+    from vasc_pipeline import config, engine
+
+    overrides = ["anneal=fast", f"n_terminals={n}", f"anneal.steps={steps}", *overrides]
+    return engine.build_problem(config.compose(overrides))
+
+
+def default_steps(n: int) -> int:
+    from vasc_pipeline import config
+
+    return config.scheduled_steps(config.compose(["anneal=fast", f"n_terminals={n}"]))
+
+
+def anneal_and_finish(problem, state) -> None:
+    from vasc_pipeline import engine
+
+    for _ in engine.anneal_blocks(problem, state, engine.Trace(), 10_000_000):
+        pass
+    engine.finish(problem, state)
+
+
+def costs(problem, state) -> dict[str, float]:
+    from vasc_pipeline import engine
+
+    c = engine.running_costs(problem, state)
+    return {"C_s": c["supply"], "vascular_W": c["volume"] + c["power"] + problem.physics.weights[0] * c["exclusion"]}
+
+
+def split_tree(coarse, problem, offset: float, seed: int):
+    """The tree of ``problem`` (2M terminals) made from the M-terminal tree ``coarse``: coarse
+    terminal j becomes a bifurcation at its position with terminals 2j and 2j + 1 at
+    ±``offset`` R_supply along a random direction (the first of 100 draws that puts both in
+    tissue; at the bifurcation if none does). Coarse bifurcations keep their positions (clipped
+    into the finer grid's box)."""
+    from vasc_pipeline import kernel
+    from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals
+
+    k, m = coarse.n_inlets, coarse.n_terminals
+    n = 2 * m
+    draw = np.random.default_rng(seed)
+    fine = np.empty(2 * m, dtype=np.int64)  # coarse node -> fine node
+    fine[:k] = np.arange(k)
+    fine[k + m :] = k + n + np.arange(m - k)  # coarse bifurcations first, ...
+    fine[k : k + m] = k + n + (m - k) + np.arange(m)  # ... then the coarse terminals, now bifurcations
+    parent = np.full(2 * n, -1, dtype=np.int64)
+    position = np.zeros((2 * n, 3))
+    position[:k] = problem.tissue.inlets
+    parent[fine[k:]] = fine[coarse.parent[k:]]
+    lo, hi = problem.tissue.bounds  # the finer grid's box can be a fraction of a voxel smaller
+    position[fine[k:]] = np.clip(coarse.position[k:], lo, hi)
+    d = offset * problem.physics.supply_radius
+    for j in range(m):
+        centre = coarse.position[k + j]
+        pair = (centre, centre)
+        for _ in range(100):
+            u = draw.normal(size=3)
+            if problem.tissue.ndim == 2:
+                u[2] = 0.0
+            u *= d / np.linalg.norm(u)
+            if kernel.legal_position(problem.model, True, centre + u) and kernel.legal_position(
+                problem.model, True, centre - u
+            ):
+                pair = (centre + u, centre - u)
+                break
+        for t, p in zip((k + 2 * j, k + 2 * j + 1), pair):
+            parent[t] = fine[k + j]
+            position[t] = p
+    tree = Tree(parent, children_from_parent(parent), position, count_terminals(parent, n, k), k)
+    check_tree(tree, problem.tissue)
+    return tree
+
+
+def run_plain(n, seed, total, args):
+    from vasc_pipeline import engine
+
+    start = time.perf_counter()
+    problem = problem_of(n, total, [])
+    state = engine.initial_state(problem, seed)
+    anneal_and_finish(problem, state)
+    return {"wall_seconds": time.perf_counter() - start, "T_start": float(state.schedule[0]), **costs(problem, state)}
+
+
+def run_split(n, seed, total, args):
+    from vasc_pipeline import engine
+    from vasc_pipeline.rng import seed_state
+
+    start = time.perf_counter()
+    coarse_steps = int(round(args.coarse_share * total))
+    coarse = problem_of(n // 2, coarse_steps, [])
+    state = engine.initial_state(coarse, seed)
+    anneal_and_finish(coarse, state)
+    coarse_costs = costs(coarse, state)
+    middle = time.perf_counter()
+    problem = problem_of(n, total - coarse_steps, args.fine)
+    tree = split_tree(engine.tree_of(coarse, state), problem, args.offset, seed)
+    state = engine.state_from_tree(problem, tree, seed_state(seed + 1))
+    split_costs = costs(problem, state)
+    anneal_and_finish(problem, state)
+    end = time.perf_counter()
+    return {
+        "wall_seconds": end - start,
+        "wall_seconds_coarse": middle - start,
+        "T_start": float(state.schedule[0]),
+        "coarse": coarse_costs,
+        "after_split": split_costs,
+        **costs(problem, state),
+    }
+
+
+def run_packed_cco(n, seed, total, args):
+    from vasc_pipeline import engine
+    from vasc_pipeline.cco import grow_tree
+    from vasc_pipeline.rng import seed_state
+
+    start = time.perf_counter()
+    pack_steps = int(round(args.packing_per_terminal * n))
+    packing_only = [f"anneal.packing_steps_per_terminal={args.packing_per_terminal}", "anneal.supply_T_start=null"]
+    packing = problem_of(n, pack_steps + 1, packing_only)
+    state = engine.initial_state(packing, seed)
+    engine.run_block(packing, state, pack_steps)
+    k = packing.model.n_inlets
+    sites = state.position[k : k + n].copy()
+    middle = time.perf_counter()
+    problem = problem_of(n, total - pack_steps, ["anneal.supply_T_start=null", *args.fine])
+    problem = dataclasses.replace(problem, sites=sites)
+    rng = seed_state(seed + 1)
+    state = engine.state_from_tree(problem, grow_tree(problem, rng)[0], rng)
+    cco_costs = costs(problem, state)
+    anneal_and_finish(problem, state)
+    end = time.perf_counter()
+    return {
+        "wall_seconds": end - start,
+        "wall_seconds_packing": middle - start,
+        "T_start": float(state.schedule[0]),
+        "cco": cco_costs,
+        **costs(problem, state),
+    }
+
+
+RUNNERS = {"plain": run_plain, "split": run_split, "packed_cco": run_packed_cco}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--strategies", nargs="+", choices=STRATEGIES, default=list(STRATEGIES))
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--budget", type=float, default=0.5, help="moves, in multiples of anneal=fast's default")
+    parser.add_argument("--coarse-share", type=float, default=0.5, help="split: share of the moves for N/2")
+    parser.add_argument("--offset", type=float, default=0.63, help="split: terminals' offset, in R_supply(N)")
+    parser.add_argument("--packing-per-terminal", type=float, default=30000.0, help="packed_cco: packing moves")
+    parser.add_argument("--fine", nargs="*", default=[], help="config overrides of the last stage (split, packed_cco)")
+    parser.add_argument("--quick", action="store_true", help="N = 40, 2e4 moves: checks the script runs")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.sizes, args.seeds, args.packing_per_terminal = [40], [0], 100.0
+    for n in args.sizes:
+        total = 20_000 if args.quick else int(round(args.budget * default_steps(n)))
+        for strategy in args.strategies:
+            for seed in args.seeds:
+                row = {"strategy": strategy, "n_terminals": n, "seed": seed, "budget": args.budget, "steps": total}
+                if strategy == "split":
+                    row.update(coarse_share=args.coarse_share, offset=args.offset)
+                if strategy == "packed_cco":
+                    row["packing_per_terminal"] = args.packing_per_terminal
+                if strategy != "plain":
+                    row["fine"] = args.fine
+                print(json.dumps({**row, **RUNNERS[strategy](n, seed, total, args)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
