@@ -71,6 +71,7 @@ def tree_measures(parent, position, radius, kind, gamma) -> dict:
 
 
 def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, wall: float, **extra) -> dict:
+    from vasc_pipeline.costs import vascular_exclusion_cost
     from vasc_pipeline.engine import node_radii
 
     m = tree_measures(
@@ -86,7 +87,7 @@ def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, w
         "seed": seed,
         "vascular": costs["volume"] + costs["power"],
         "exclusion_scaled": w_o * costs["exclusion"],
-        "vascular_exclusion": costs["volume"] + costs["power"] + w_o * costs["exclusion"],
+        "vascular_exclusion": vascular_exclusion_cost(costs, w_o),
         "wall_seconds": wall,
         **extra,
         **m,

@@ -121,6 +121,7 @@ def morphometry_row(morph) -> dict:
 def row_of(store_path: str, schedule: str, budget: float) -> dict:
     """The benchmark's row of a complete run store."""
     from vasc_pipeline import morphometry
+    from vasc_pipeline.costs import vascular_exclusion_cost
     from vasc_pipeline.store import RunStore
 
     store = RunStore.open(store_path, mode="r")
@@ -136,7 +137,7 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
         "wall_seconds": float(a["wall_seconds"]),
         "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
         "cost_supply": float(c["supply"]),
-        "cost_vascular": float(c["volume"] + c["power"] + w_o * c["exclusion"]),
+        "cost_vascular": float(vascular_exclusion_cost(c, w_o)),
         "cost_total": float(c["total"]),
         "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
     }

@@ -61,9 +61,10 @@ def anneal_and_finish(problem, state) -> None:
 
 def costs(problem, state) -> dict[str, float]:
     from vasc_pipeline import engine
+    from vasc_pipeline.costs import vascular_exclusion_cost
 
     c = engine.running_costs(problem, state)
-    return {"C_s": c["supply"], "vascular_W": c["volume"] + c["power"] + problem.physics.weights[0] * c["exclusion"]}
+    return {"C_s": c["supply"], "vascular_W": vascular_exclusion_cost(c, problem.physics.weights[0])}
 
 
 def split_tree(coarse, problem, offset: float, seed: int):
@@ -194,6 +195,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.quick:
         args.sizes, args.seeds, args.packing_per_terminal = [40], [0], 100.0
+    if "split" in args.strategies and any(n % 2 for n in args.sizes):
+        parser.error("--strategies split halves N: every --sizes value must be even")
     for n in args.sizes:
         total = 20_000 if args.quick else int(round(args.budget * default_steps(n)))
         for strategy in args.strategies:

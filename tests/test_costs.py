@@ -275,3 +275,13 @@ def test_mask_tissue_takes_a_second_mask_for_its_exclusion_domain(tmp_path):
         tissue.build_tissue(
             "mask", 10, path=str(tmp_path / "tissue.npy"), exclusion_path=str(tmp_path / "no.npy"), **common
         )
+
+
+def test_vascular_exclusion_cost_is_the_total_without_supply_and_pressure(sphere_problem):
+    physics = sphere_problem.physics
+    terms = {"volume": 0.25, "power": 1.5, "exclusion": 3e-7, "pressure": 2e4, "supply": 900.0}
+    w_o = physics.weights[0]
+    assert w_o > 0
+    expected = costs.total_cost({**terms, "supply": 0.0, "pressure": 0.0}, physics)
+    assert costs.vascular_exclusion_cost(terms, w_o) == pytest.approx(expected, rel=1e-15)
+    assert costs.vascular_exclusion_cost(terms, w_o) == pytest.approx(1.75 + w_o * 3e-7, rel=1e-15)

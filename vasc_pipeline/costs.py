@@ -210,6 +210,12 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
     return out
 
 
+def vascular_exclusion_cost(terms: dict[str, float], w_exclusion: float) -> float:
+    """C_v + C_w + (A_o / A_wv) C_o [W], with ``w_exclusion`` = A_o / A_wv: the annealed cost
+    without the supply and pressure terms, the "vascular part" the benchmarks report."""
+    return terms["volume"] + terms["power"] + w_exclusion * terms["exclusion"]
+
+
 def total_cost(terms: dict[str, float], physics: Physics) -> float:
     """The annealed cost C = (C_w + C_v) + (A_o C_o + A_p C_p + A_s C_s) / A_wv."""
     w_o, w_p, w_s = physics.weights
