@@ -19,7 +19,7 @@ Times are the measuring thread's CPU time (the kernel runs in it, releasing the 
 other processes on the machine take their time slices without inflating the figures; they
 still share caches and memory bandwidth, so measure on a quiet machine when you can.
 
-Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--anneal fast] [--run-budget 0.1]
+Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--anneal fast|fast_v1|paper] [--run-budget 0.1]
        python benchmarks/kernel_throughput.py --quick    # N = 20, a few thousand moves (seconds)
 """
 
@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[500, 1000, 2000, 6000])
     parser.add_argument("--moves", type=int, default=400_000)
     parser.add_argument("--warmup", type=int, default=2_000_000)
-    parser.add_argument("--anneal", choices=["paper", "fast"], default="paper", help="schedule (default: paper)")
+    presets = sorted(p.stem for p in (config.CONFIG_DIR / "anneal").glob("*.yaml"))
+    parser.add_argument("--anneal", choices=presets, default="paper", help="schedule preset (default: paper)")
     parser.add_argument(
         "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
     )

@@ -64,7 +64,8 @@ def jobs_for(
     base = [f"anneal={schedule}", f"n_terminals={n}", *extra]
     if steps is None:
         steps = int(round(budget * scheduled_steps(to_run_config(config.compose(base)))))
-    where = f"output_dir={out / (label or schedule) / f'x{budget:g}'}"
+    # Quoted, so that a label may hold what Hydra's override grammar reserves ("p_swap=0.3").
+    where = f"output_dir='{out / (label or schedule) / f'x{budget:g}'}'"
     return [
         j
         for seed in seeds

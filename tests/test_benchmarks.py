@@ -41,3 +41,16 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
         assert row["n_terminals"] == 40 and row["n_orders"] == len(row["orders"]) >= 2
         assert 0 <= row["exclusion_share_terminal_segments"] <= 1 and row["cost_exclusion_weighted"] > 0
         assert sum(row[f"terminal_share_{name}"] for name in ("LCA", "RCA")) == pytest.approx(1)
+
+
+def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
+    """A variant's label names its directory; '=' and spaces in it must not reach Hydra's grammar."""
+    sys.path.insert(0, str(BENCHMARKS[0].parent))
+    try:
+        import time_to_quality
+    finally:
+        sys.path.pop(0)
+    label = "mix p_swap=0.3"
+    (job,) = time_to_quality.jobs_for(tmp_path, "fast", 0.3, 40, [0], 2000, ["anneal.p_swap=0.3"], label)
+    assert Path(job.store).parent.parent == tmp_path / label / "x0.3"
+    assert job.config["anneal"]["p_swap"] == 0.3
