@@ -1,16 +1,19 @@
 """Where the kernel's time goes: nanoseconds per proposed move by move class and cost term.
 
-For the heart at one N (default 1000), from the seed-0 initial tree placed at three points
-of a schedule (start, middle, end: the temperature follows the step counter), runs blocks
-of moves with the model restricted to one move class, or with one cost term switched off
-(timing only: the running sums of such runs are meaningless), and prints one JSON line per
-phase:
+For the heart at one N (default 1000), the schedule is run from the seed-0 initial tree with
+``--run-budget`` (0.1) times its default budget, as ``kernel_throughput.py`` runs it, and
+stopped at three points (start, middle, end: 5, 50 and 95 % of its moves), so the states are
+those a run visits. From each, blocks of moves are run with the model restricted to one move
+class, or with one cost term switched off (timing only: the running sums of such runs are
+meaningless), and one JSON line per phase is printed:
 
     ns_per_move: all moves; swap; translate (terminal + bifurcation); bifurcation
     translate; terminal translate (derived); translate without supply; translate
     without exclusion; plus the acceptance of each class.
 
-Usage: python benchmarks/kernel_profile.py [--n-terminals 1000] [--moves 200000] [--anneal fast]
+Times are the measuring thread's CPU time, as in ``kernel_throughput.py``.
+
+Usage: python benchmarks/kernel_profile.py [--n-terminals 1000] [--moves 200000] [--anneal fast] [--run-budget 0.1]
        python benchmarks/kernel_profile.py --quick    # tiny sizes, seconds (run by the tests)
 """
 
@@ -22,15 +25,15 @@ import time
 
 from vasc_pipeline import config, engine, kernel
 
+PHASES = (("start", 0.05), ("middle", 0.5), ("end", 0.95))
 
-def ns_per_move(problem, base, model, frac: float, moves: int, warmup: int) -> tuple[float, dict]:
-    state = engine.restore_state(problem, engine.state_arrays(base))
-    state.counters[kernel.COUNTER_STEP] = int(frac * model.total_steps)
-    kernel.anneal_block(model, state, warmup)
+
+def ns_per_move(problem, arrays, model, moves: int) -> tuple[float, dict]:
+    state = engine.restore_state(problem, arrays)
     before = state.counters.copy()
-    start = time.perf_counter()
+    start = time.thread_time()
     kernel.anneal_block(model, state, moves)
-    elapsed = time.perf_counter() - start
+    elapsed = time.thread_time() - start
     c = state.counters - before
     acceptance = {}
     for name, proposed in (
@@ -43,12 +46,12 @@ def ns_per_move(problem, base, model, frac: float, moves: int, warmup: int) -> t
     return elapsed / moves * 1e9, acceptance
 
 
-def profile(n_terminals: int, moves: int, warmup: int, anneal: str) -> list[dict]:
-    problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]))
-    base = engine.initial_state(problem, seed=0)
-    engine.run_block(
-        problem, engine.restore_state(problem, engine.state_arrays(base)), 1000
-    )  # compile outside the timing
+def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> list[dict]:
+    base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]
+    run_steps = max(3, round(run_budget * engine.build_problem(config.compose(base)).total_steps))
+    problem = engine.build_problem(config.compose([*base, f"anneal.steps={run_steps}"]))
+    state = engine.initial_state(problem, seed=0)
+    engine.run_block(problem, engine.restore_state(problem, engine.state_arrays(state)), 1000)  # compile
     m = problem.model
     variants = {
         "all": m,
@@ -59,10 +62,15 @@ def profile(n_terminals: int, moves: int, warmup: int, anneal: str) -> list[dict
         "translate_without_exclusion": m._replace(p_swap=0.0, exclusion_on=False),
     }
     rows = []
-    for phase, frac in (("start", 0.0), ("middle", 0.5), ("end", 1.0)):
+    done = 0
+    for phase, frac in PHASES:
+        step = int(frac * run_steps)
+        engine.run_block(problem, state, step - done)
+        done = step
+        arrays = engine.state_arrays(state)
         ns, acc = {}, {}
         for name, model in variants.items():
-            ns[name], acc[name] = ns_per_move(problem, base, model, frac, moves, warmup)
+            ns[name], acc[name] = ns_per_move(problem, arrays, model, moves)
         # Translations pick terminals and bifurcations equally often.
         ns["terminal_translate"] = 2 * ns["translate"] - ns["bifurcation_translate"]
         rows.append(
@@ -70,7 +78,9 @@ def profile(n_terminals: int, moves: int, warmup: int, anneal: str) -> list[dict
                 "n_terminals": n_terminals,
                 "anneal": anneal,
                 "phase": phase,
-                "temperature": kernel.temperature(m, base, int(frac * m.total_steps)),
+                "run_steps": run_steps,
+                "step": step,
+                "temperature": kernel.temperature(m, state, step),
                 "ns_per_move": {k: round(v) for k, v in ns.items()},
                 "acceptance_all_moves": acc["all"],
             }
@@ -82,13 +92,16 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-terminals", type=int, default=1000)
     parser.add_argument("--moves", type=int, default=200_000)
-    parser.add_argument("--warmup", type=int, default=20_000)
-    parser.add_argument("--anneal", choices=["paper", "fast"], default="fast", help="schedule (default: fast)")
+    presets = sorted(p.stem for p in (config.CONFIG_DIR / "anneal").glob("*.yaml"))
+    parser.add_argument("--anneal", choices=presets, default="fast", help="schedule preset (default: fast)")
+    parser.add_argument(
+        "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
+    )
     parser.add_argument("--quick", action="store_true", help="tiny sizes (N = 20, 2000 moves): checks the script runs")
     args = parser.parse_args(argv)
     if args.quick:
-        args.n_terminals, args.moves, args.warmup = 20, 2000, 200
-    for row in profile(args.n_terminals, args.moves, args.warmup, args.anneal):
+        args.n_terminals, args.moves, args.run_budget = 20, 2000, 1e-3
+    for row in profile(args.n_terminals, args.moves, args.anneal, args.run_budget):
         print(json.dumps(row), flush=True)
 
 

@@ -62,6 +62,30 @@ def test_kernel_traversal_equals_numpy_twin(sphere_problem):
         )
 
 
+def test_capped_traversal_stops_at_the_first_voxel_past_the_cap(sphere_problem):
+    """Below the cap the full sum, bit for bit; past it the prefix of the walk that first
+    exceeds the cap (so never more than the full sum: a move rejected on it is rejected)."""
+    model, t = sphere_problem.model, sphere_problem.tissue
+    pts = random_points(sphere_problem, 600, 7)
+    n_stopped = 0
+    for p0, p1 in zip(pts[::2], pts[1::2]):
+        full = kernel.segment_exclusion(model, p0, p1)
+        assert kernel.segment_exclusion_capped(model, p0, p1, np.inf) == full
+        assert kernel.segment_exclusion_capped(model, p0, p1, full) == full
+        u0, u1 = ((p - t.origin) / t.voxel_size for p in (p0, p1))
+        idx, pieces = costs.voxel_pieces(u0, u1, t.shape)
+        terms = (t.distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64) * pieces) ** 6
+        prefix = np.cumsum(terms[terms > 0])
+        steps = np.flatnonzero(np.diff(prefix) > 1e-6 * prefix[1:])  # caps between clearly distinct prefixes
+        for k in steps[:: max(1, steps.size // 4)]:
+            cap = 0.5 * (prefix[k] + prefix[k + 1])
+            got = kernel.segment_exclusion_capped(model, p0, p1, cap)
+            assert cap < got <= full
+            assert got == pytest.approx(prefix[k + 1], rel=1e-12)
+            n_stopped += 1
+    assert n_stopped > 100
+
+
 def test_segment_outside_tissue_costs_nothing(sphere_problem):
     model, t = sphere_problem.model, sphere_problem.tissue
     lo, hi = t.bounds

@@ -228,14 +228,25 @@ def segment_exclusion(model, p0, p1):
 
     Voxel coordinates put voxel centres at integers; the segment is clipped to the grid.
     """
+    return segment_exclusion_capped(model, p0, p1, np.inf)
+
+
+@jit_norc_inline
+def segment_exclusion_capped(model, p0, p1, cap):
+    """:func:`segment_exclusion`, stopped at the first voxel that takes the sum above ``cap``.
+
+    The sum then returned exceeds ``cap`` and is a prefix of the full one, so no larger than
+    it (every voxel adds a term >= 0, each addition rounding monotonically): a move rejected
+    on it is rejected on the full sum. At or below ``cap`` it is the full sum, bit for bit.
+    """
     o = model.origin
-    return _traverse(model.distance, o[0], o[1], o[2], model.voxel_size, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2])
+    return _traverse(model.distance, o[0], o[1], o[2], model.voxel_size, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2], cap)
 
 
 @jit_norc
-def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
-    """:func:`segment_exclusion` on scalars: a call passes a few words, not the whole ``Model``
-    (numba passes a named tuple field by field, each array as its full descriptor)."""
+def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z, cap):
+    """:func:`segment_exclusion_capped` on scalars: a call passes a few words, not the whole
+    ``Model`` (numba passes a named tuple field by field, each array as its full descriptor)."""
     nz, ny, nx = dist.shape
     flat = dist.reshape(-1)
     ux = (p0x - ox) / h
@@ -296,6 +307,8 @@ def _traverse(dist, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z):
                 x = depth * ((tn - t) * length)
                 x3 = x * x * x
                 acc += x3 * x3
+                if acc > cap:
+                    break
         elif depth < 0.0:
             # This voxel's block of the grid holds no domain voxel: its voxels add nothing, so
             # leap to the first voxel past the block, in the state the walk would reach there.
@@ -763,6 +776,49 @@ def _early_reject(lower_bound, temp, rng, u):
     return u >= math.exp(-lower_bound / temp), u
 
 
+# A traversal is stopped where ΔC reaches this many temperatures when the move has drawn no
+# uniform yet: the uniform it then draws rejects it unless below e^-20.
+_REJECT_HORIZON = 20.0
+
+
+@jit_norc_inline
+def _exclusion_cap(model, temp, u, bound, n):
+    """The traversal sum of a new segment (n terminals downstream) past which its move is
+    rejected. ``bound``: the move's ΔC with this and the later new segments' exclusion taken
+    as 0; ``u``: its uniform, or -1 when none is drawn yet (then the sum at which ΔC reaches
+    _REJECT_HORIZON temperatures). Infinite when the early rejection is off."""
+    slope = model.w_exclusion * model.tables[TABLE_EXCLUSION, n]
+    if not (model.early_reject and not model.pressure_on and slope > 0.0):
+        return np.inf
+    limit = -temp * math.log(u) if u >= 0.0 else temp * _REJECT_HORIZON
+    return (limit - bound) / slope
+
+
+@jit_norc_inline
+def _new_exclusion(model, p0, p1, n, temp, rng, u, bound, vascular, pre, mid, old_exc, w_sup, d_sup, swap):
+    """Traversal sum of a move's new segment p0 -> p1 (n terminals downstream), or a rejection.
+
+    The traversal stops once its sum passes :func:`_exclusion_cap`; the move is then checked
+    on a lower bound of ΔC with that partial sum, written as the move's final ΔC writes it
+    (so no larger than it in floating point): exclusion change (pre + (mid + x)) - old_exc
+    for a translation, pre + ((mid + x) - old_exc) for a swap (``swap``), x this segment's
+    cost, ``mid`` the new segments' costs before it that the final sum groups with it,
+    ``pre`` the others, later new segments at 0. If the bound does not reject, the full sum
+    is traversed. ``bound``: ΔC with this and later new segments at 0. Returns
+    (sum, rejected, u), ``u`` as in :func:`_early_reject`.
+    """
+    cap = _exclusion_cap(model, temp, u, bound, n)
+    s = segment_exclusion_capped(model, p0, p1, cap)
+    if s > cap:
+        x = _exclusion_cost(model, n, s)
+        d_exc = pre + ((mid + x) - old_exc) if swap else (pre + (mid + x)) - old_exc
+        rejected, u = _early_reject(weighted_total(model, vascular, d_exc, 0.0, w_sup, d_sup), temp, rng, u)
+        if rejected:
+            return s, True, u
+        s = segment_exclusion(model, p0, p1)
+    return s, False, u
+
+
 @jit_norc_inline
 def _accept_with(d_cost, temp, rng, u):
     """:func:`_accept`, reusing the uniform ``u`` when :func:`_early_reject` drew one."""
@@ -941,30 +997,53 @@ def _translate_node(model, state, i, new, temp):
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
     # early rejection on a lower bound
     u = -1.0
-    if model.early_reject and not model.pressure_on:
-        bound = weighted_total(model, d_vol + d_pow, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
+    check = model.early_reject and not model.pressure_on
+    vascular = d_vol + d_pow
+    bound = 0.0
+    if check:
+        bound = weighted_total(model, vascular, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
         rejected, u = _early_reject(bound, temp, rng, -1.0)
         if rejected:
             return REJECTED
-    # exclusion
+    # exclusion: each new segment's traversal stops once its sum rejects the move; the bounds
+    # on a partial sum are the final ΔC's expression with the missing terms at 0
     d_exc = 0.0
     exc_i = 0.0
     exc_c0 = 0.0
     exc_c1 = 0.0
     if model.exclusion_on:
-        exc_i = segment_exclusion(model, new, pos[p])
-        d_exc = _exclusion_cost(model, state.n_downstream[i], exc_i)
+        n_i = state.n_downstream[i]
+        exc_i, rejected, u = _new_exclusion(
+            model, new, pos[p], n_i, temp, rng, u, bound, vascular, 0.0, 0.0, old_exc, w_sup, d_sup, False
+        )
+        if rejected:
+            return REJECTED
+        d_exc = _exclusion_cost(model, n_i, exc_i)
         if not is_terminal:
-            if model.early_reject and not model.pressure_on:  # the children's exclusion still taken as 0
-                bound = weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, w_sup, d_sup)
+            n_c0 = state.n_downstream[c0]
+            n_c1 = state.n_downstream[c1]
+            if check:  # the children's exclusion still taken as 0
+                bound = weighted_total(model, vascular, d_exc - old_exc, 0.0, w_sup, d_sup)
                 rejected, u = _early_reject(bound, temp, rng, u)
                 if rejected:
                     return REJECTED
-            exc_c0 = segment_exclusion(model, pos[c0], new)
-            exc_c1 = segment_exclusion(model, pos[c1], new)
-            d_exc += _exclusion_cost(model, state.n_downstream[c0], exc_c0) + _exclusion_cost(
-                model, state.n_downstream[c1], exc_c1
+            exc_c0, rejected, u = _new_exclusion(
+                model, pos[c0], new, n_c0, temp, rng, u, bound, vascular, d_exc, 0.0, old_exc, w_sup, d_sup, False
             )
+            if rejected:
+                return REJECTED
+            cost_c0 = _exclusion_cost(model, n_c0, exc_c0)
+            if check:  # c1's exclusion still taken as 0
+                bound = weighted_total(model, vascular, (d_exc + (cost_c0 + 0.0)) - old_exc, 0.0, w_sup, d_sup)
+                rejected, u = _early_reject(bound, temp, rng, u)
+                if rejected:
+                    return REJECTED
+            exc_c1, rejected, u = _new_exclusion(
+                model, pos[c1], new, n_c1, temp, rng, u, bound, vascular, d_exc, cost_c0, old_exc, w_sup, d_sup, False
+            )
+            if rejected:
+                return REJECTED
+            d_exc += cost_c0 + _exclusion_cost(model, n_c1, exc_c1)
         d_exc -= old_exc
     # pressure (recomputed in full on the tentative lengths)
     new_pressure = 0.0
@@ -973,7 +1052,7 @@ def _translate_node(model, state, i, new, temp):
         new_pressure = _pressure_with_lengths(model, state, i, len_i, c0, len_c0, c1, len_c1)
         d_pre = new_pressure - state.costs[PRESSURE]
     # Metropolis, then commit
-    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, w_sup, d_sup)
+    d_cost = weighted_total(model, vascular, d_exc, d_pre, w_sup, d_sup)
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[MOVE_COUNTERS[cls, N_ACCEPTED]] += 1
@@ -1148,24 +1227,34 @@ def _swap_nodes(model, state, a, b, temp):
     old_exc = _segment_exclusion_cost(model, state, a) + _segment_exclusion_cost(model, state, b)
     # early rejection on a lower bound (new segments' exclusion taken as 0)
     u = -1.0
-    if model.early_reject and not model.pressure_on:
-        rejected, u = _early_reject(
-            weighted_total(model, d_vol + d_pow, d_exc - old_exc, 0.0, 0.0, 0.0), temp, rng, -1.0
-        )
+    check = model.early_reject and not model.pressure_on
+    vascular = d_vol + d_pow
+    bound = 0.0
+    if check:
+        bound = weighted_total(model, vascular, d_exc - old_exc, 0.0, 0.0, 0.0)
+        rejected, u = _early_reject(bound, temp, rng, -1.0)
         if rejected:
             return REJECTED
-    # exclusion
+    # exclusion, each traversal stopped once its sum rejects the move (as in _translate_node)
     new_exc_a = 0.0
     new_exc_b = 0.0
     if model.exclusion_on:
-        new_exc_a = segment_exclusion(model, pos[a], pos[pb])
+        new_exc_a, rejected, u = _new_exclusion(
+            model, pos[a], pos[pb], na, temp, rng, u, bound, vascular, d_exc, 0.0, old_exc, 0.0, 0.0, True
+        )
+        if rejected:
+            return REJECTED
         cost_a = _exclusion_cost(model, na, new_exc_a)
-        if model.early_reject and not model.pressure_on:  # b's new exclusion still taken as 0
-            bound = weighted_total(model, d_vol + d_pow, d_exc + (cost_a - old_exc), 0.0, 0.0, 0.0)
+        if check:  # b's new exclusion still taken as 0
+            bound = weighted_total(model, vascular, d_exc + (cost_a - old_exc), 0.0, 0.0, 0.0)
             rejected, u = _early_reject(bound, temp, rng, u)
             if rejected:
                 return REJECTED
-        new_exc_b = segment_exclusion(model, pos[b], pos[pa])
+        new_exc_b, rejected, u = _new_exclusion(
+            model, pos[b], pos[pa], nb, temp, rng, u, bound, vascular, d_exc, cost_a, old_exc, 0.0, 0.0, True
+        )
+        if rejected:
+            return REJECTED
         d_exc += (cost_a + _exclusion_cost(model, nb, new_exc_b)) - old_exc
     # pressure (recomputed in full on the tentatively swapped tree)
     d_pre = 0.0
@@ -1176,7 +1265,7 @@ def _swap_nodes(model, state, a, b, temp):
         _exchange_parents(state, a, b, lca)
         d_pre = new_pressure - state.costs[PRESSURE]
     # Metropolis, then commit
-    d_cost = weighted_total(model, d_vol + d_pow, d_exc, d_pre, 0.0, 0.0)  # a swap leaves C_s alone
+    d_cost = weighted_total(model, vascular, d_exc, d_pre, 0.0, 0.0)  # a swap leaves C_s alone
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[COUNTER_SWAP_ACCEPTED] += 1
