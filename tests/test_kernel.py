@@ -12,7 +12,7 @@ from helpers import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasc_pipeline import engine, kernel
+from vasc_pipeline import engine, kernel, physics
 from vasc_pipeline.tree import count_terminals
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
@@ -194,3 +194,25 @@ def test_early_rejection_changes_no_decision(overrides):
         final[early] = engine.state_arrays(state)
     for name, value in final[True].items():
         np.testing.assert_array_equal(value, final[False][name], err_msg=name)
+
+
+def test_new_segment_traversal_rejects_on_its_partial_sum_or_traverses_in_full():
+    """kernel._new_exclusion's two branches, forced: a cap far below the segment's sum stops
+    the traversal; a bound that then rejects returns the partial sum with the rejection, one
+    that does not (a downhill move) returns the full sum, as if no cap had been set."""
+    problem = make_problem("tissue=sphere", "n_terminals=50", "anneal.steps=1000")
+    model = problem.model
+    n = model.n_terminals  # the trunk's n: its radius is above the exclusion cut-off
+    assert model.w_exclusion * model.tables[physics.TABLE_EXCLUSION, n] > 0
+    r = problem.tissue.inlets[0][2]
+    p0, p1 = np.array([-0.6 * r, 0.0, 0.0]), np.array([0.6 * r, 0.1 * r, 0.0])
+    full = kernel.segment_exclusion(model, p0, p1)
+    assert full > 0
+    rng = np.zeros(4, dtype=np.uint64)  # not drawn from: u is given
+    temp, u = 1e-12, 0.5  # cap = T ln 2 / slope: a tiny fraction of the sum
+    for vascular, rejected in ((1e-9, True), (-1e300, False)):
+        s, was_rejected, u_out = kernel._new_exclusion(
+            model, p0, p1, n, temp, rng, u, 0.0, vascular, 0.0, 0.0, 0.0, 0.0, 0.0, False
+        )
+        assert was_rejected == rejected and u_out == u
+        assert (0 < s < full) if rejected else (s == full)
