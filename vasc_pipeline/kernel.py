@@ -776,6 +776,13 @@ def _early_reject(lower_bound, temp, rng, u):
     return u >= math.exp(-lower_bound / temp), u
 
 
+@jit_norc_inline
+def _bounds_apply(model):
+    """Whether a move is checked on lower bounds of ΔC before its dear terms (the pressure term,
+    recomputed in full, has no cheap bound; ``Model.early_reject`` False turns them off to test)."""
+    return model.early_reject and not model.pressure_on
+
+
 # A traversal is stopped where ΔC reaches this many temperatures when the move has drawn no
 # uniform yet: the uniform it then draws rejects it unless below e^-20.
 _REJECT_HORIZON = 20.0
@@ -788,7 +795,7 @@ def _exclusion_cap(model, temp, u, bound, n):
     as 0; ``u``: its uniform, or -1 when none is drawn yet (then the sum at which ΔC reaches
     _REJECT_HORIZON temperatures). Infinite when the early rejection is off."""
     slope = model.w_exclusion * model.tables[TABLE_EXCLUSION, n]
-    if not (model.early_reject and not model.pressure_on and slope > 0.0):
+    if not (_bounds_apply(model) and slope > 0.0):
         return np.inf
     limit = -temp * math.log(u) if u >= 0.0 else temp * _REJECT_HORIZON
     return (limit - bound) / slope
@@ -997,7 +1004,7 @@ def _translate_node(model, state, i, new, temp):
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
     # early rejection on a lower bound
     u = -1.0
-    check = model.early_reject and not model.pressure_on
+    check = _bounds_apply(model)
     vascular = d_vol + d_pow
     bound = 0.0
     if check:
@@ -1227,7 +1234,7 @@ def _swap_nodes(model, state, a, b, temp):
     old_exc = _segment_exclusion_cost(model, state, a) + _segment_exclusion_cost(model, state, b)
     # early rejection on a lower bound (new segments' exclusion taken as 0)
     u = -1.0
-    check = model.early_reject and not model.pressure_on
+    check = _bounds_apply(model)
     vascular = d_vol + d_pow
     bound = 0.0
     if check:
