@@ -23,7 +23,9 @@ import argparse
 import json
 import time
 
-from vasc_pipeline import config, engine, kernel
+from kernel_throughput import ANNEAL_PRESETS, trajectory_problem
+
+from vasc_pipeline import engine, kernel
 
 PHASES = (("start", 0.05), ("middle", 0.5), ("end", 0.95))
 
@@ -48,8 +50,7 @@ def ns_per_move(problem, arrays, model, moves: int) -> tuple[float, dict]:
 
 def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> list[dict]:
     base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]
-    run_steps = max(3, round(run_budget * engine.build_problem(config.compose(base)).total_steps))
-    problem = engine.build_problem(config.compose([*base, f"anneal.steps={run_steps}"]))
+    problem, run_steps, _ = trajectory_problem(base, run_budget)
     state = engine.initial_state(problem, seed=0)
     engine.run_block(problem, engine.restore_state(problem, engine.state_arrays(state)), 1000)  # compile
     m = problem.model
@@ -92,8 +93,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-terminals", type=int, default=1000)
     parser.add_argument("--moves", type=int, default=200_000)
-    presets = sorted(p.stem for p in (config.CONFIG_DIR / "anneal").glob("*.yaml"))
-    parser.add_argument("--anneal", choices=presets, default="fast", help="schedule preset (default: fast)")
+    parser.add_argument("--anneal", choices=ANNEAL_PRESETS, default="fast", help="schedule preset (default: fast)")
     parser.add_argument(
         "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
     )

@@ -31,6 +31,18 @@ import time
 
 from vasc_pipeline import config, engine, kernel
 
+# Every schedule preset in conf/anneal/ (fast_v1 too), for --anneal here and in kernel_profile.py.
+ANNEAL_PRESETS = sorted(p.stem for p in (config.CONFIG_DIR / "anneal").glob("*.yaml"))
+
+
+def trajectory_problem(base: list[str], run_budget: float):
+    """The problem of ``base`` with ``run_budget`` times its schedule's default moves (at least 3),
+    the same temperatures spread over fewer moves; returns (that problem, its moves, ``base``'s
+    own problem)."""
+    problem = engine.build_problem(config.compose(base))
+    run_steps = max(3, round(run_budget * problem.total_steps))
+    return engine.build_problem(config.compose([*base, f"anneal.steps={run_steps}"])), run_steps, problem
+
 
 def trajectory_rates(problem, total_steps: int, pieces: int = 3) -> list[float]:
     """Moves per second over ``pieces`` equal parts of a run of ``total_steps`` (kernel time only)."""
@@ -68,10 +80,9 @@ def harmonic_mean(rates) -> float:
 
 def measure(n_terminals: int, moves: int, warmup: int, anneal: str = "paper", run_budget: float = 0.1) -> dict:
     base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]
-    problem = engine.build_problem(config.compose(base))
+    run_problem, run_steps, problem = trajectory_problem(base, run_budget)
     total = problem.total_steps  # the schedule's budget: paper 1e9 (N/1000)^2, fast 1e8 (N/1000)^2
-    run_steps = max(3, round(run_budget * total))
-    thirds = trajectory_rates(engine.build_problem(config.compose([*base, f"anneal.steps={run_steps}"])), run_steps)
+    thirds = trajectory_rates(run_problem, run_steps)
     phases = phase_rates(problem, moves, warmup)
     rate = harmonic_mean(thirds)
     return {
@@ -94,8 +105,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[500, 1000, 2000, 6000])
     parser.add_argument("--moves", type=int, default=400_000)
     parser.add_argument("--warmup", type=int, default=2_000_000)
-    presets = sorted(p.stem for p in (config.CONFIG_DIR / "anneal").glob("*.yaml"))
-    parser.add_argument("--anneal", choices=presets, default="paper", help="schedule preset (default: paper)")
+    parser.add_argument("--anneal", choices=ANNEAL_PRESETS, default="paper", help="schedule preset (default: paper)")
     parser.add_argument(
         "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
     )
