@@ -168,6 +168,36 @@ def test_step_adaptation_by_hand():
     assert state.step_size[1] <= model.step_max[1]
 
 
+def test_full_width_terminal_moves_stop_after_their_phase_and_leave_the_stream_alone():
+    """Before ``full_width_phase`` the run is the default's move for move; after it no terminal
+    move is wider than the adapted step (held tiny here), though full-width ones are drawn."""
+    base = ["tissue=plane2d", "n_terminals=30", "anneal=fast", "anneal.steps=20000", "anneal.adapt_window=1000000"]
+    default = make_problem(*base)
+    cut = make_problem(*base, "anneal.full_width_phase=0.5")
+    assert cut.model.full_width_steps == 10000 and default.model.full_width_steps == 20000
+    states = {}
+    for name, problem in (("default", default), ("cut", cut)):
+        state = engine.initial_state(problem, seed=2)
+        engine.run_block(problem, state, 10000)
+        states[name] = state
+    np.testing.assert_array_equal(states["default"].position, states["cut"].position)
+    np.testing.assert_array_equal(states["default"].rng, states["cut"].rng)
+    k = default.model.n_inlets
+    terminals = slice(k, k + default.model.n_terminals)
+    for name, problem in (("default", default), ("cut", cut)):
+        state = states[name]
+        state.step_size[0] = 1e-6 * problem.model.step_max[0]
+        widest = 0.0
+        for _ in range(5000):
+            before = state.position[terminals].copy()
+            engine.run_block(problem, state, 1)
+            widest = max(widest, np.abs(state.position[terminals] - before).max())
+        if name == "cut":
+            assert widest <= state.step_size[0]
+        else:  # the full-width moves, accepted at this temperature, are what the cut removes
+            assert widest > 100 * state.step_size[0]
+
+
 def test_supply_weight_follows_its_schedule_then_is_the_true_weight():
     problem = make_problem("tissue=plane2d", "anneal=fast", "anneal.steps=1000000")
     model = problem.model
@@ -247,6 +277,7 @@ def test_the_job_stores_how_the_schedule_ran(tmp_path):
         ("anneal.adapt_window=0", "anneal.adapt_window"),
         ("anneal.supply_T_end=10", "anneal.supply_T_end"),
         ("anneal.supply_phase=0", "anneal.supply_phase"),
+        ("anneal.full_width_phase=1.5", "anneal.full_width_phase"),
         ("anneal.T_end_rel=-1", "anneal.T_end_rel"),
     ],
 )

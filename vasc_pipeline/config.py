@@ -73,6 +73,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.packing_T_start": 1.0,
     "anneal.packing_T_end": 0.05,
     "anneal.init": "random",
+    "anneal.full_width_phase": 1.0,
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
@@ -159,6 +160,8 @@ class AnnealConfig:
     supply_T_end: float = 0.05  # ... at the end of its phase, in C_s units (0.05: +1 accepted at e^-20)
     supply_phase: float = 0.5  # fraction of the steps the supply schedule runs; then the true weight
     adapt_steps: bool = False  # adapt half-widths to keep acceptance near acceptance_target
+    full_width_phase: float = 1.0  # with adapted steps: fraction of the steps in which half of the terminal
+    # moves keep the full width step_terminal; afterwards every terminal move takes the adapted step
     acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
     polish: bool = False  # optimise the final topology's bifurcation positions (geometry.polish)
@@ -341,6 +344,8 @@ def validate(cfg: RunConfig) -> RunConfig:
             )
     if not 0.0 < a.supply_phase <= 1.0:
         raise ConfigError(f"anneal.supply_phase must lie in (0, 1], got {a.supply_phase}")
+    if not 0.0 < a.full_width_phase <= 1.0:
+        raise ConfigError(f"anneal.full_width_phase must lie in (0, 1], got {a.full_width_phase}")
     _positive("anneal.neighbour_cell", a.neighbour_cell)
     if not isinstance(a.polish_swaps_max_terminals, int) or a.polish_swaps_max_terminals < 0:
         raise ConfigError(

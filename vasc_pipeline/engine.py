@@ -197,6 +197,7 @@ def build_problem(config: Any) -> Problem:
         supply_T_end=float(a.supply_T_end),
         supply_steps=float(round(a.supply_phase * (total_steps - pack_steps))) if a.supply_T_start is not None else 0.0,
         adapt_steps=bool(a.adapt_steps),
+        full_width_steps=float(round(a.full_width_phase * (total_steps - pack_steps))),
         acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,

@@ -67,6 +67,8 @@ Model = namedtuple(
         "supply_steps",  # supply's own schedule (C_s units) over the first
         # supply_steps proposals; supply_steps = 0: off, the supply weight is w_supply throughout
         "adapt_steps",  # adapt translation half-widths to keep acceptance near acceptance_target
+        "full_width_steps",  # with adapt_steps, the tree anneal's steps in which half of the terminal
+        # moves keep the full width (step_max[0])
         "acceptance_target",
         "adapt_window",
         "step_max",  # step_max float64 (2,) m: the configured half-widths
@@ -854,8 +856,10 @@ def _translate(model, state, temp, new):
     half = state.step_size[cls]
     # With adapted steps, half of the terminal moves keep the full width: the supply term
     # is optimised by downhill search over moves of voxel scale, which narrowed steps
-    # (sub-voxel, accepted for their vascular gain) would stop.
-    full_width = model.adapt_steps and cls == 0 and next_double(rng) < 0.5
+    # (sub-voxel, accepted for their vascular gain) would stop. Once the packing has jammed
+    # such moves are never accepted (from a quarter of a `fast` run on), and each costs two
+    # adapted ones, so they stop after full_width_steps; the uniform is drawn either way.
+    full_width = model.adapt_steps and cls == 0 and next_double(rng) < 0.5 and _full_width_on(model, state)
     if full_width:
         half = model.step_max[0]
     for a in range(3):
@@ -866,6 +870,13 @@ def _translate(model, state, temp, new):
     if model.adapt_steps and not full_width:
         _adapt_step(model, state, cls, outcome == ACCEPTED)
     return outcome
+
+
+@jit_norc_inline
+def _full_width_on(model, state):
+    """Whether terminal moves may still take the full width (the tree anneal's first
+    ``full_width_steps`` steps)."""
+    return state.counters[COUNTER_STEP] - model.pack_steps < model.full_width_steps
 
 
 @jit_norc_inline
