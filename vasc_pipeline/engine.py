@@ -163,6 +163,10 @@ def build_problem(config: Any) -> Problem:
             "tissue.voxel_size, or leave it unset (R_supply / 4)"
         )
     sphere_voxels = math.pi * rho**2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho**3  # C_s scale of one move
+
+    def tree_steps(phase: float) -> float:  # a share of the tree anneal's steps (after packing)
+        return float(round(phase * (total_steps - pack_steps)))
+
     model = kernel.Model(
         n_inlets=k,
         n_terminals=n,
@@ -195,9 +199,9 @@ def build_problem(config: Any) -> Problem:
         cell_shape=cell_shape,
         supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels,
         supply_T_end=float(a.supply_T_end),
-        supply_steps=float(round(a.supply_phase * (total_steps - pack_steps))) if a.supply_T_start is not None else 0.0,
+        supply_steps=tree_steps(a.supply_phase) if a.supply_T_start is not None else 0.0,
         adapt_steps=bool(a.adapt_steps),
-        full_width_steps=float(round(a.full_width_phase * (total_steps - pack_steps))),
+        full_width_steps=tree_steps(a.full_width_phase),
         acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,

@@ -857,7 +857,7 @@ def _translate(model, state, temp, new):
     # With adapted steps, half of the terminal moves keep the full width: the supply term
     # is optimised by downhill search over moves of voxel scale, which narrowed steps
     # (sub-voxel, accepted for their vascular gain) would stop. Once the packing has jammed
-    # such moves are never accepted (from a quarter of a `fast` run on), and each costs two
+    # such moves are never accepted (from a quarter of a `fast` run on) and cost more than
     # adapted ones, so they stop after full_width_steps; the uniform is drawn either way.
     full_width = model.adapt_steps and cls == 0 and next_double(rng) < 0.5 and _full_width_on(model, state)
     if full_width:
