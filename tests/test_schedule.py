@@ -169,22 +169,25 @@ def test_step_adaptation_by_hand():
 
 
 def test_full_width_terminal_moves_stop_after_their_phase_and_leave_the_stream_alone():
-    """Before ``full_width_phase`` the run is the default's move for move; after it no terminal
-    move is wider than the adapted step (held tiny here), though full-width ones are drawn."""
+    """Before ``full_width_phase`` the run is the whole-run setting's (``fast_v1``'s) move for
+    move; after it no terminal move is wider than the adapted step (held tiny here), though
+    full-width ones are drawn."""
     base = ["tissue=plane2d", "n_terminals=30", "anneal=fast", "anneal.steps=20000", "anneal.adapt_window=1000000"]
-    default = make_problem(*base)
+    whole_run = make_problem(*base, "anneal.full_width_phase=1.0")
     cut = make_problem(*base, "anneal.full_width_phase=0.5")
-    assert cut.model.full_width_steps == 10000 and default.model.full_width_steps == 20000
+    assert cut.model.full_width_steps == 10000 and whole_run.model.full_width_steps == 20000
+    assert make_problem(*base).model.full_width_steps == 5000  # fast's own cut: a quarter
+    assert make_problem(*base[:2], "anneal=fast_v1", *base[3:]).model.full_width_steps == 20000
     states = {}
-    for name, problem in (("default", default), ("cut", cut)):
+    for name, problem in (("whole_run", whole_run), ("cut", cut)):
         state = engine.initial_state(problem, seed=2)
         engine.run_block(problem, state, 10000)
         states[name] = state
-    np.testing.assert_array_equal(states["default"].position, states["cut"].position)
-    np.testing.assert_array_equal(states["default"].rng, states["cut"].rng)
-    k = default.model.n_inlets
-    terminals = slice(k, k + default.model.n_terminals)
-    for name, problem in (("default", default), ("cut", cut)):
+    np.testing.assert_array_equal(states["whole_run"].position, states["cut"].position)
+    np.testing.assert_array_equal(states["whole_run"].rng, states["cut"].rng)
+    k = whole_run.model.n_inlets
+    terminals = slice(k, k + whole_run.model.n_terminals)
+    for name, problem in (("whole_run", whole_run), ("cut", cut)):
         state = states[name]
         state.step_size[0] = 1e-6 * problem.model.step_max[0]
         widest = 0.0
