@@ -177,6 +177,12 @@ def temperature(model, state, step):
 
 
 @jit_norc_inline
+def _tree_step(model, state):
+    """The tree anneal's own step: proposals since the packing phase ended."""
+    return state.counters[COUNTER_STEP] - model.pack_steps
+
+
+@jit_norc_inline
 def supply_weight(model, state, temp):
     """Weight of ΔC_s in the Metropolis test at ``temp``.
 
@@ -185,7 +191,7 @@ def supply_weight(model, state, temp):
     weight is temp / T_s, never above w_supply. Afterwards (and when off) it is w_supply,
     so the run ends on the true cost.
     """
-    step = state.counters[COUNTER_STEP] - model.pack_steps  # the tree anneal's own step
+    step = _tree_step(model, state)
     if step >= model.supply_steps:
         return model.w_supply
     frac = step / model.supply_steps
@@ -876,7 +882,7 @@ def _translate(model, state, temp, new):
 def _full_width_on(model, state):
     """Whether terminal moves may still take the full width (the tree anneal's first
     ``full_width_steps`` steps)."""
-    return state.counters[COUNTER_STEP] - model.pack_steps < model.full_width_steps
+    return _tree_step(model, state) < model.full_width_steps
 
 
 @jit_norc_inline
