@@ -172,7 +172,7 @@ def build_problem(config: Any) -> Problem:
         n_terminals=n,
         tables=cost_tables(physics).array,
         mask=tissue.mask,
-        distance=kernel.leap_map(tissue.distance) if terms.exclusion else tissue.distance,
+        **kernel.depth_fields(kernel.leap_map(tissue.distance) if terms.exclusion else tissue.distance),
         origin=tissue.origin,
         voxel_size=float(tissue.voxel_size),
         box_lo=lo,
