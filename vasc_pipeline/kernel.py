@@ -215,11 +215,12 @@ _BLOCK_MASK = LEAP_BLOCK - 1
 
 
 def leap_map(distance):
-    """The exclusion distance map as the traversal reads it: the depth inside the domain; outside
-    it -1 where the voxel's block (``LEAP_BLOCK`` voxels a side, aligned with the grid) holds no
-    domain voxel, else 0. The walk leaps over such a block instead of visiting its voxels, which
-    add nothing to the sum (in the first half of a heart run, a fifth to a half of the voxels a
-    segment crosses; measured on an N = 1000 run). Blocks of 16 measured faster than 8 (more
+    """The exclusion distance map as the traversal reads it (the kernel holds it as
+    :func:`depth_fields`): the depth inside the domain; outside it -1 where the voxel's block
+    (``LEAP_BLOCK`` voxels a side, aligned with the grid) holds no domain voxel, else 0. The
+    walk leaps over such a block instead of visiting its voxels, which add nothing to the sum
+    (in the first half of a heart run, a fifth to a half of the voxels a segment crosses;
+    measured on an N = 1000 run). Blocks of 16 measured faster than 8 (more
     leaps, each ~30 ns of dependent arithmetic) and 32 (fewer empty blocks)."""
     distance = np.asarray(distance, dtype=np.float32)
     inside = distance > 0.0
@@ -309,7 +310,7 @@ def _traverse(depth_index, depth_values, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y,
     # Parameter of the next plane crossing on each axis, computed from the plane itself
     # (not accumulated, so no drift along long segments); multiplying by the reciprocal
     # keeps the divide off the loop's critical path. (A branch-free axis choice measured
-    # slower: the loop is bound by loads of the distance map, not by mispredictions.)
+    # slower: the loop is bound by loads of the depth map, not by mispredictions.)
     rx = 1.0 / dx if dx != 0.0 else 0.0
     ry = 1.0 / dy if dy != 0.0 else 0.0
     rz = 1.0 / dz if dz != 0.0 else 0.0
