@@ -287,7 +287,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument(
         "--anneal-steps",
         type=int,
-        help="anneal.steps of the anneal runs (default: the schedule's budget, 1e8 (N/1000)^2); use a separate --out",
+        help="anneal.steps of the anneal runs (default: the schedule's budget, fast: 6.25e7 (N/1000)^2); "
+        "use a separate --out",
     )
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument("--out", type=Path, help="directory for sites, runs.jsonl and tables.json")

@@ -168,4 +168,4 @@ def test_bad_packing_settings_name_the_field(overrides, message):
 
 def test_budget_law_exponent():
     cfg = config.to_run_config(config.compose(["n_terminals=2000", "anneal=fast", "anneal.steps_exponent=1.5"]))
-    assert config.scheduled_steps(cfg) == round(1e8 * 2.0**1.5)
+    assert config.scheduled_steps(cfg) == round(6.25e7 * 2.0**1.5)

@@ -176,7 +176,7 @@ def test_full_width_terminal_moves_stop_after_their_phase_and_leave_the_stream_a
     whole_run = make_problem(*base, "anneal.full_width_phase=1.0")
     cut = make_problem(*base, "anneal.full_width_phase=0.5")
     assert cut.model.full_width_steps == 10000 and whole_run.model.full_width_steps == 20000
-    assert make_problem(*base).model.full_width_steps == 5000  # fast's own cut: a quarter
+    assert make_problem(*base).model.full_width_steps == 8000  # fast's own: 0.4 of its moves, a quarter of the path
     assert make_problem(*base[:2], "anneal=fast_v1", *base[3:]).model.full_width_steps == 20000
     states = {}
     for name, problem in (("whole_run", whole_run), ("cut", cut)):
@@ -201,8 +201,77 @@ def test_full_width_terminal_moves_stop_after_their_phase_and_leave_the_stream_a
             assert widest > 100 * state.step_size[0]
 
 
+def test_a_cold_part_changes_the_cooling_rate_once_where_it_starts():
+    """``anneal.cold_from`` / ``cold_share``: log T falls linearly in the step on each side of the
+    point cold_from of the way from T_start to T_end, reached when 1 - cold_share of the tree
+    anneal's steps are done (after the packing phase); without them, the one exponential."""
+    base = ["tissue=plane2d", "n_terminals=30", "anneal=fast", "anneal.steps=100000"]
+    base.append("anneal.packing_steps_per_terminal=1000")
+    problem = make_problem(*base, "anneal.cold_from=0.6", "anneal.cold_share=0.25")
+    model = problem.model
+    state = engine.initial_state(problem, seed=1)
+    t_start, t_end = state.schedule
+    pack, end = model.pack_steps, model.total_steps
+    knee = pack + 0.75 * (end - pack)
+    assert (pack, model.cold_steps, model.cold_path) == (30_000, 52_500, 0.6)
+
+    def path(step):
+        return math.log(kernel.temperature(model, state, step) / t_start) / math.log(t_end / t_start)
+
+    assert path(0) == path(pack) == 0.0
+    assert path(knee) == pytest.approx(0.6, abs=1e-12)
+    assert path(end) == path(2 * end) == pytest.approx(1.0, abs=1e-12)
+    for a, b in ((pack, knee), (knee, end)):
+        assert path((a + b) / 2) == pytest.approx((path(a) + path(b)) / 2, abs=1e-12)
+
+    plain = make_problem(*base, "anneal.cold_from=null", "anneal.cold_share=null")
+    plain_state = engine.initial_state(plain, seed=1)
+    np.testing.assert_array_equal(plain_state.schedule, state.schedule)  # calibration is the same
+    for step in (0, pack, pack + 12_345, knee, end, 2 * end):
+        exponential = t_start * math.exp(math.log(t_end / t_start) * min(max(step - pack, 0) / (end - pack), 1.0))
+        assert kernel.temperature(plain.model, plain_state, step) == exponential  # to the bit
+
+
+def test_block_splits_across_the_start_of_the_cold_part_are_bit_identical():
+    overrides = ("tissue=plane2d", "n_terminals=30", "anneal=fast", "anneal.steps=40000")
+    problem = make_problem(*overrides, "anneal.cold_from=0.5", "anneal.cold_share=0.5")
+    one = engine.initial_state(problem, seed=4)
+    engine.run_block(problem, one, 40_000)
+    split = engine.initial_state(problem, seed=4)
+    for n in (1, 19_998, 3, 19_998):  # the cold part starts at 20 000, inside a block
+        engine.run_block(problem, split, n)
+        split = engine.restore_state(problem, engine.state_arrays(split))
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+
+
+def test_fast_runs_its_hot_half_move_for_move_as_the_one_exponential_over_the_old_budget():
+    """``fast``'s cold part (the second half of the path in a fifth of 0.625 of the old budget)
+    leaves the hot half as it was: the one exponential over 1.6 times the moves, with the old
+    supply and full-width phases, reaches the knee in the same state, to the bit."""
+    base = ["tissue=plane2d", "n_terminals=30", "anneal=fast"]
+    two_part = make_problem(*base, "anneal.steps=50000")
+    old = make_problem(
+        *base,
+        "anneal.steps=80000",
+        "anneal.cold_from=null",
+        "anneal.cold_share=null",
+        "anneal.supply_phase=0.5",
+        "anneal.full_width_phase=0.25",
+    )
+    assert two_part.model.cold_steps == 40_000 and old.model.cold_steps == 80_000
+    states = []
+    for problem in (two_part, old):
+        state = engine.initial_state(problem, seed=6)
+        engine.run_block(problem, state, 40_000)
+        states.append(state)
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(states[0], name), getattr(states[1], name), err_msg=name)
+    assert states[0].counters[kernel.COUNTER_SWAP_ACCEPTED] > 0
+
+
 def test_supply_weight_follows_its_schedule_then_is_the_true_weight():
-    problem = make_problem("tissue=plane2d", "anneal=fast", "anneal.steps=1000000")
+    problem = make_problem("tissue=plane2d", "anneal=fast", "anneal.steps=1000000", "anneal.supply_phase=0.5")
     model = problem.model
     state = engine.initial_state(problem, seed=0)
     rho = problem.physics.supply_radius / problem.tissue.voxel_size
@@ -282,11 +351,14 @@ def test_the_job_stores_how_the_schedule_ran(tmp_path):
         ("anneal.supply_phase=0", "anneal.supply_phase"),
         ("anneal.full_width_phase=1.5", "anneal.full_width_phase"),
         ("anneal.T_end_rel=-1", "anneal.T_end_rel"),
+        ("anneal.cold_share=null", "anneal.cold_share"),
+        ("anneal.cold_from=1.0 anneal.cold_share=0.2", "anneal.cold_from"),
+        ("anneal.cold_from=0.5 anneal.cold_share=0", "anneal.cold_share"),
     ],
 )
 def test_bad_fast_settings_name_the_field(override, field):
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
-        config.compose(["anneal=fast", override])
+        config.compose(["anneal=fast", *override.split()])
 
 
 def _fixed_sites(tmp_path, n, seed):

@@ -49,8 +49,8 @@ def test_mb_scan_matches_the_paper():
     m_b = cfg.sweep.m_b
     assert 641.3 in m_b and max(m_b) / 641.3 >= 10 - 1e-9 and 641.3 / min(m_b) >= 10 - 1e-9  # two decades
     assert len(cfg.sweep.seeds) >= 4
-    # Steps: the schedule's default: 1e8 at N = 1000 for anneal=fast, the paper's 1e9 for anneal=paper.
-    assert all(config.scheduled_steps(j.run_config()) == 100_000_000 for j in sweep.expand(cfg))
+    # Steps: the schedule's default: 6.25e7 at N = 1000 for anneal=fast, the paper's 1e9 for anneal=paper.
+    assert all(config.scheduled_steps(j.run_config()) == 62_500_000 for j in sweep.expand(cfg))
     paper = sweep.expand(config.compose(["+sweep=mb_scan", "anneal=paper"]))
     assert all(config.scheduled_steps(j.run_config()) == 1_000_000_000 for j in paper)
 
@@ -58,7 +58,7 @@ def test_mb_scan_matches_the_paper():
 def test_size_scan_steps_scale_with_n_squared():
     cfg = config.compose(["+sweep=size_scan"])
     assert cfg.sweep.n_terminals == [500, 1000, 2000, 4000, 6000] and cfg.tissue.name == "heart"
-    for schedule, at_1000 in (("fast", 1e8), ("paper", 1e9)):
+    for schedule, at_1000 in (("fast", 6.25e7), ("fast_v1", 1e8), ("paper", 1e9)):
         for j in sweep.expand(config.compose(["+sweep=size_scan", f"anneal={schedule}"])):
             n = j.coords["n_terminals"]
             assert config.scheduled_steps(j.run_config()) == round(at_1000 * (n / 1000) ** 2)

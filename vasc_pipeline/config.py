@@ -74,6 +74,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.packing_T_end": 0.05,
     "anneal.init": "random",
     "anneal.full_width_phase": 1.0,
+    "anneal.cold_from": None,
+    "anneal.cold_share": None,
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
@@ -162,6 +164,9 @@ class AnnealConfig:
     adapt_steps: bool = False  # adapt half-widths to keep acceptance near acceptance_target
     full_width_phase: float = 1.0  # with adapted steps: fraction of the steps in which half of the terminal
     # moves keep the full width step_terminal; afterwards every terminal move takes the adapted step
+    cold_from: Optional[float] = None  # where the schedule's cold part starts, as a share of the way from
+    # T_start to T_end in log T; None: one exponential from T_start to T_end
+    cold_share: Optional[float] = None  # with cold_from: the share of the tree anneal's steps spent in it
     acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
     polish: bool = False  # optimise the final topology's bifurcation positions (geometry.polish)
@@ -346,6 +351,15 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"anneal.supply_phase must lie in (0, 1], got {a.supply_phase}")
     if not 0.0 < a.full_width_phase <= 1.0:
         raise ConfigError(f"anneal.full_width_phase must lie in (0, 1], got {a.full_width_phase}")
+    if (a.cold_from is None) != (a.cold_share is None):
+        raise ConfigError(
+            f"anneal.cold_from and anneal.cold_share are set together (both null: one exponential), "
+            f"got cold_from={a.cold_from}, cold_share={a.cold_share}"
+        )
+    if a.cold_from is not None:
+        for name in ("cold_from", "cold_share"):
+            if not 0.0 < getattr(a, name) < 1.0:
+                raise ConfigError(f"anneal.{name} must lie in (0, 1), got {getattr(a, name)}")
     _positive("anneal.neighbour_cell", a.neighbour_cell)
     if not isinstance(a.polish_swaps_max_terminals, int) or a.polish_swaps_max_terminals < 0:
         raise ConfigError(

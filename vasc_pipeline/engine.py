@@ -190,6 +190,8 @@ def build_problem(config: Any) -> Problem:
         pressure_terminal=p.pressure_terminal,
         total_steps=float(total_steps),
         pack_steps=float(pack_steps),
+        cold_steps=tree_steps(1.0 - a.cold_share) if a.cold_from is not None else tree_steps(1.0),
+        cold_path=float(a.cold_from) if a.cold_from is not None else 1.0,
         pack_T_start=float(a.packing_T_start) * sphere_voxels,
         pack_T_end=float(a.packing_T_end),
         p_swap=float(a.p_swap),

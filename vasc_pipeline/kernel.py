@@ -56,6 +56,10 @@ Model = namedtuple(
         "pressure_terminal",  # Pa
         "total_steps",  # proposals of the run; the exponential schedule (ends in State.schedule) runs
         # from pack_steps to total_steps
+        "cold_steps",  # tree anneal steps before the schedule's cold part ...
+        "cold_path",  # ... and the share of log(T_end / T_start) covered by then: the schedule is
+        # exponential on each side of that point (cold_steps = all tree steps, cold_path = 1: one
+        # exponential)
         "pack_steps",  # proposals of the packing phase (vasc_pipeline.packing; 0: none)
         "pack_T_start",
         "pack_T_end",  # its temperatures, C_s units
@@ -172,8 +176,19 @@ def weighted_total(model, vascular, exclusion, pressure, w_supply, supply):
 
 @jit_norc
 def temperature(model, state, step):
-    """Exponential schedule ``state.schedule`` = (T_start, T_end) from pack_steps to total_steps; T_end afterwards."""
-    frac = min(max(step - model.pack_steps, 0.0) / (model.total_steps - model.pack_steps), 1.0)
+    """Schedule ``state.schedule`` = (T_start, T_end) from pack_steps to total_steps, T_end afterwards:
+    exponential in the step, with its rate changed once where the cold part starts (cold_steps,
+    cold_path; without a cold part, one exponential)."""
+    tree_step = max(step - model.pack_steps, 0.0)
+    tree_steps = model.total_steps - model.pack_steps
+    if tree_step >= tree_steps:
+        frac = 1.0
+    elif tree_step < model.cold_steps:
+        frac = model.cold_path * (tree_step / model.cold_steps)
+    else:
+        frac = model.cold_path + (1.0 - model.cold_path) * (
+            (tree_step - model.cold_steps) / (tree_steps - model.cold_steps)
+        )
     t_start = state.schedule[0]
     return t_start * math.exp(math.log(state.schedule[1] / t_start) * frac)
 
