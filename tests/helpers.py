@@ -72,6 +72,14 @@ def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True)
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
 TIMEOUT = 240  # seconds any one subprocess may take before the test fails
+# `anneal=fast` as it was before its cold part (2026-11-26): one exponential over all of its
+# moves, the supply schedule over the first half of them, full-width terminal moves over a quarter.
+FAST_ONE_EXPONENTIAL = (
+    "anneal.cold_from=null",
+    "anneal.cold_share=null",
+    "anneal.supply_phase=0.5",
+    "anneal.full_width_phase=0.25",
+)
 # A run of a few seconds: the size the reliability tests use.
 TINY_RUN = [
     "tissue=sphere",

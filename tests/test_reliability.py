@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zarr
-from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish, free_port
+from helpers import ENV, FAST_ONE_EXPONENTIAL, TIMEOUT, TINY_RUN, cli, finish, free_port
 
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
 from vasc_pipeline.config import ConfigError
@@ -279,10 +279,8 @@ def test_5_every_float_must_be_finite(override, field):
 
 def test_5_a_deterministic_failure_is_not_retried_and_says_a_rerun_fails_the_same_way(tmp_path):
     # A trajectory whose polish meets an exactly singular factor: `fast` as it was before its
-    # cold part (2026-11-26); the failure, not the schedule, is what this test is about.
-    one_exponential = ["anneal.cold_from=null", "anneal.cold_share=null", "anneal.supply_phase=0.5"]
-    one_exponential.append("anneal.full_width_phase=0.25")
-    code, output = finish(cli(*TINY_RUN, *one_exponential, f"output_dir={tmp_path}", "physics.m_b=1e300"))
+    # cold part; the failure, not the schedule, is what this test is about.
+    code, output = finish(cli(*TINY_RUN, *FAST_ONE_EXPONENTIAL, f"output_dir={tmp_path}", "physics.m_b=1e300"))
     assert code == 1, output
     assert "FAILED: RuntimeError: Factor is exactly singular (deterministic: a rerun fails the same way)" in output
     assert "failed deterministically" in output and "Rerun the same command" not in output, output

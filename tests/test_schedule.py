@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from helpers import (
+    FAST_ONE_EXPONENTIAL,
     assert_moves_of_every_kind_accepted_and_rejected,
     assert_running_equals_full,
     make_problem,
@@ -251,14 +252,7 @@ def test_fast_runs_its_hot_half_move_for_move_as_the_one_exponential_over_the_ol
     supply and full-width phases, reaches the knee in the same state, to the bit."""
     base = ["tissue=plane2d", "n_terminals=30", "anneal=fast"]
     two_part = make_problem(*base, "anneal.steps=50000")
-    old = make_problem(
-        *base,
-        "anneal.steps=80000",
-        "anneal.cold_from=null",
-        "anneal.cold_share=null",
-        "anneal.supply_phase=0.5",
-        "anneal.full_width_phase=0.25",
-    )
+    old = make_problem(*base, "anneal.steps=80000", *FAST_ONE_EXPONENTIAL)
     assert two_part.model.cold_steps == 40_000 and old.model.cold_steps == 80_000
     states = []
     for problem in (two_part, old):
