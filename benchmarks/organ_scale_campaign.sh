@@ -14,7 +14,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/organ_scale}
 T=(python benchmarks/time_to_quality.py --out "$OUT" --workers 1)
-PACK=(--anneal fast --label pack --override anneal.packing_steps_per_terminal=10000
+# The packing candidate on fast_v1's schedule and budget, as measured (fast has changed since).
+PACK=(--anneal fast_v1 --label pack --override anneal.packing_steps_per_terminal=10000
       --override anneal.supply_T_start=null)
 for seeds in "0 1" "2 3"; do
     for n in 500 1000 2000; do

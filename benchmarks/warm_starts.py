@@ -17,7 +17,7 @@ Each strategy spends the same number of proposals, ``--budget`` times the defaul
 
 One JSON line per (strategy, N, seed): C_s, the vascular cost C_v + C_w + (A_o/A_wv) C_o [W],
 the wall seconds of each stage and the fine stage's calibrated T_start [W]. Results
-measured with it: README, "What was tried for fewer moves", and
+measured with it: benchmarks/README.md, "What was tried for fewer moves", and
 ``benchmarks/results/warm_start_rows.jsonl``.
 
     python benchmarks/warm_starts.py --sizes 1000 --budget 0.5 --seeds 0 1

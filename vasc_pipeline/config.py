@@ -169,8 +169,8 @@ class AnnealConfig:
     cold_share: Optional[float] = None  # with cold_from: the share of the tree anneal's steps spent in it
     acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
-    polish: bool = False  # optimise the final topology's bifurcation positions (geometry.polish)
-    polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (geometry.descend_swaps)
+    polish: bool = False  # optimise the final topology's bifurcation positions (finish.polish)
+    polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (finish.descend_swaps)
     trace_every: int = 100_000  # steps between trace records
     init: str = "random"  # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.cco, method.* settings)
 

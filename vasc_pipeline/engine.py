@@ -152,7 +152,7 @@ def build_problem(config: Any) -> Problem:
     if np.prod(cell_shape) > 20_000_000:
         raise ConfigError(
             f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
-            "cells (at most 2e7); use a larger value (in R_supply, default 1)"
+            "cells (at most 2e7); use a larger value (in R_supply; fast: 2, paper and fast_v1: 1)"
         )
     rho = physics.supply_radius / tissue.voxel_size
     if rho < 1.0:  # the supply term counts voxels within R_supply of a terminal: it needs several

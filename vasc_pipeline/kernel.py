@@ -254,7 +254,7 @@ def depth_fields(depth_map):
     value, so that ``depth_values[depth_index]`` is the map bit for bit. A distance transform
     takes few distinct values (square roots of integers: 4 361 at N = 6000), so the index
     grid is uint16, half the float32 map's bytes: the traversal's loads then miss the cache
-    less on the large grids of organ-scale runs (measured in the README, "A compact depth map")."""
+    less on the large grids of organ-scale runs (measured in benchmarks/README.md, "A compact depth map")."""
     values, index = np.unique(np.asarray(depth_map, dtype=np.float32), return_inverse=True)
     dtype = np.uint16 if len(values) <= 1 << 16 else np.uint32
     return {
