@@ -2,18 +2,20 @@
 
 For the heart at one N (default 1000), the schedule is run from the seed-0 initial tree with
 ``--run-budget`` (0.1) times its default budget, as ``kernel_throughput.py`` runs it, and
-stopped at three points (start, middle, end: 5, 50 and 95 % of its moves), so the states are
-those a run visits. From each, blocks of moves are run with the model restricted to one move
+stopped at three points (start, middle, end: 5, 50 and 95 % of its moves; ``--phases`` sets
+others), so the states are those a run visits. From each, blocks of moves are run with the model restricted to one move
 class, or with one cost term switched off (timing only: the running sums of such runs are
 meaningless), and one JSON line per phase is printed:
 
-    ns_per_move: all moves; swap; translate (terminal + bifurcation); bifurcation
-    translate; terminal translate (derived); translate without supply; translate
-    without exclusion; plus the acceptance of each class.
+    ns_per_move: all moves; swap; swap without exclusion (the two paths' walks and the
+    rest, without the new segments' traversals); translate (terminal + bifurcation);
+    bifurcation translate; terminal translate (derived); translate without supply;
+    translate without exclusion; plus the acceptance of each class.
 
 Times are the measuring thread's CPU time, as in ``kernel_throughput.py``.
 
 Usage: python benchmarks/kernel_profile.py [--n-terminals 1000] [--moves 200000] [--anneal fast] [--run-budget 0.1]
+                                          [--phases 0.05 0.5 0.95]
        python benchmarks/kernel_profile.py --quick    # tiny sizes, seconds (run by the tests)
 """
 
@@ -27,7 +29,7 @@ from kernel_throughput import ANNEAL_PRESETS, trajectory_problem
 
 from vasc_pipeline import engine, kernel
 
-PHASES = (("start", 0.05), ("middle", 0.5), ("end", 0.95))
+PHASES = {0.05: "start", 0.5: "middle", 0.95: "end"}  # share of the trajectory's moves: name
 
 
 def ns_per_move(problem, arrays, model, moves: int) -> tuple[float, dict]:
@@ -48,7 +50,7 @@ def ns_per_move(problem, arrays, model, moves: int) -> tuple[float, dict]:
     return elapsed / moves * 1e9, acceptance
 
 
-def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> list[dict]:
+def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases=tuple(PHASES)) -> list[dict]:
     base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]
     problem, run_steps, _ = trajectory_problem(base, run_budget)
     state = engine.initial_state(problem, seed=0)
@@ -57,6 +59,7 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> lis
     variants = {
         "all": m,
         "swap": m._replace(p_swap=1.0),
+        "swap_without_exclusion": m._replace(p_swap=1.0, exclusion_on=False),
         "translate": m._replace(p_swap=0.0),
         "bifurcation_translate": m._replace(p_swap=0.0, move_terminals=False),
         "translate_without_supply": m._replace(p_swap=0.0, supply_on=False),
@@ -64,7 +67,7 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> lis
     }
     rows = []
     done = 0
-    for phase, frac in PHASES:
+    for frac in sorted(phases):
         step = int(frac * run_steps)
         engine.run_block(problem, state, step - done)
         done = step
@@ -78,7 +81,7 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float) -> lis
             {
                 "n_terminals": n_terminals,
                 "anneal": anneal,
-                "phase": phase,
+                "phase": PHASES.get(frac, f"{frac:g}"),
                 "run_steps": run_steps,
                 "step": step,
                 "temperature": kernel.temperature(m, state, step),
@@ -97,11 +100,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
     )
+    parser.add_argument(
+        "--phases", type=float, nargs="+", default=list(PHASES), help="shares of the trajectory's moves to profile at"
+    )
     parser.add_argument("--quick", action="store_true", help="tiny sizes (N = 20, 2000 moves): checks the script runs")
     args = parser.parse_args(argv)
     if args.quick:
         args.n_terminals, args.moves, args.run_budget = 20, 2000, 1e-3
-    for row in profile(args.n_terminals, args.moves, args.anneal, args.run_budget):
+    if not all(0.0 <= f < 1.0 for f in args.phases):
+        parser.error(f"--phases must lie in [0, 1), got {args.phases}")
+    for row in profile(args.n_terminals, args.moves, args.anneal, args.run_budget, args.phases):
         print(json.dumps(row), flush=True)
 
 
