@@ -3,9 +3,9 @@
 For the heart at one N (default 1000), the schedule is run from the seed-0 initial tree with
 ``--run-budget`` (0.1) times its default budget, as ``kernel_throughput.py`` runs it, and
 stopped at three points (start, middle, end: 5, 50 and 95 % of its moves; ``--phases`` sets
-others), so the states are those a run visits. From each, blocks of moves are run with the model restricted to one move
-class, or with one cost term switched off (timing only: the running sums of such runs are
-meaningless), and one JSON line per phase is printed:
+others), so the states are those a run visits. From each, blocks of moves are run with the
+model restricted to one move class, or with one cost term switched off (timing only: the
+running sums of such runs are meaningless), and one JSON line per phase is printed:
 
     ns_per_move: all moves; swap; swap without exclusion (the two paths' walks and the
     rest, without the new segments' traversals); translate (terminal + bifurcation);
