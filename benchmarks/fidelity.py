@@ -37,7 +37,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from time_to_quality import ARTERIES, jobs_for, morphometry_row, run_one
+from time_to_quality import ARTERIES, jobs_for, morphometry_row, run_one, seed_groups, seed_stats
 
 KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
 KASSAB_TOP_ORDER = {"RCA": 11, "LAD": 11, "LCX": 10}  # each artery's trunk order in Tables 1-3
@@ -219,17 +219,12 @@ SUMMARY = (
 
 def summarise(rows: list[dict]) -> list[dict]:
     """Mean and SE over seeds per (variant, budget, N); inlet columns included."""
+    keys = ("variant", "budget", "n_terminals")
     table = []
-    for key in sorted({(r["variant"], r["budget"], r["n_terminals"]) for r in rows}):
-        sel = [r for r in rows if (r["variant"], r["budget"], r["n_terminals"]) == key]
-        entry = {"variant": key[0], "budget": key[1], "n_terminals": key[2], "seeds": len(sel)}
+    for key, sel in seed_groups(rows, keys):
         names = [n for n in SUMMARY if n in sel[0]]
         names += sorted(k for k in sel[0] if k.startswith(("root_diameter", "terminal_share")))
-        for name in names:
-            v = np.array([r[name] for r in sel], dtype=float)
-            entry[name] = float(v.mean())
-            entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
-        table.append(entry)
+        table.append({**dict(zip(keys, key)), "seeds": len(sel), **seed_stats(sel, names)})
     return table
 
 

@@ -159,18 +159,32 @@ SUMMARY_FIELDS = [  # what summarise averages over seeds
 ]
 
 
+def seed_groups(rows: list[dict], keys: tuple[str, ...]) -> list[tuple[tuple, list[dict]]]:
+    """The rows grouped by their values of ``keys`` (the runs of one configuration over seeds),
+    in sorted order of those values."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return sorted(groups.items())
+
+
+def seed_stats(group: list[dict], names) -> dict:
+    """Mean over a group's runs of each name, and its standard error as name + "_se" (NaN for one run)."""
+    entry = {}
+    for name in names:
+        v = np.array([r[name] for r in group], dtype=float)
+        entry[name] = float(v.mean())
+        entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+    return entry
+
+
 def summarise(rows: list[dict]) -> list[dict]:
     """Mean and standard error over seeds per (N, schedule, budget)."""
-    table = []
-    for key in sorted({(r["n_terminals"], r["anneal"], r["budget"]) for r in rows}):
-        sel = [r for r in rows if (r["n_terminals"], r["anneal"], r["budget"]) == key]
-        entry = {"n_terminals": key[0], "anneal": key[1], "budget": key[2], "steps": sel[0]["steps"], "seeds": len(sel)}
-        for name in SUMMARY_FIELDS:
-            v = np.array([r[name] for r in sel], dtype=float)
-            entry[name] = float(v.mean())
-            entry[name + "_se"] = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
-        table.append(entry)
-    return table
+    keys = ("n_terminals", "anneal", "budget")
+    return [
+        {**dict(zip(keys, key)), "steps": sel[0]["steps"], "seeds": len(sel), **seed_stats(sel, SUMMARY_FIELDS)}
+        for key, sel in seed_groups(rows, keys)
+    ]
 
 
 def print_table(table: list[dict]) -> None:
