@@ -90,8 +90,11 @@ def split_tree(coarse, problem, offset: float, seed: int):
     lo, hi = problem.tissue.bounds  # the finer grid's box can be a fraction of a voxel smaller
     position[fine[k:]] = np.clip(coarse.position[k:], lo, hi)
     d = offset * problem.physics.supply_radius
+    # A coarse terminal on the border of the coarse grid may lie just outside the finer one:
+    # into it, so that the fallback (both children at the centre) is a legal place too.
+    centres = problem.tissue.move_into(problem.tissue.mask, coarse.position[k:])
     for j in range(m):
-        centre = coarse.position[k + j]
+        centre = centres[j]
         pair = (centre, centre)
         for _ in range(100):
             u = draw.normal(size=3)

@@ -50,7 +50,7 @@ def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
         import time_to_quality
     finally:
         sys.path.pop(0)
-    label = "mix p_swap=0.3"
-    (job,) = time_to_quality.jobs_for(tmp_path, "fast", 0.3, 40, [0], 2000, ["anneal.p_swap=0.3"], label)
+    label = "mix p_swap=0.7"
+    (job,) = time_to_quality.jobs_for(tmp_path, "fast", 0.3, 40, [0], 2000, ["anneal.p_swap=0.7"], label)
     assert Path(job.store).parent.parent == tmp_path / label / "x0.3"
-    assert job.config["anneal"]["p_swap"] == 0.3
+    assert job.config["anneal"]["p_swap"] == 0.7  # not the default (0.3)

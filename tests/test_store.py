@@ -300,8 +300,8 @@ def test_identity_differences_allow_sweep_axes_and_a_second_method_only(tmp_path
     base = cfg("n_terminals=16")
     assert store.identity_differences(base, cfg("n_terminals=24", "seed=3", "physics.m_b=6413")) == []
     assert store.identity_differences(base, cfg("n_terminals=16", "method=cco")) == []  # the method comparison
-    assert store.identity_differences(base, cfg("n_terminals=16", "anneal.p_swap=0.3")) == [
-        "anneal.p_swap: 0.5 (stored) vs 0.3 (requested)"
+    assert store.identity_differences(base, cfg("n_terminals=16", "anneal.p_swap=0.7")) == [
+        "anneal.p_swap: 0.3 (stored) vs 0.7 (requested)"
     ]
     assert store.identity_differences(base, cfg("method=cco", "physics.gamma=3.0")) == [
         "physics.gamma: 2.1 (stored) vs 3.0 (requested)"
