@@ -12,6 +12,11 @@ running sums of such runs are meaningless), and one JSON line per phase is print
     bifurcation translate; terminal translate (derived); translate without supply;
     translate without exclusion; plus the acceptance of each class.
 
+    exclusion_cost_over_temperature: quantiles (25, 50, 75, 90 %) over the tree's segments of
+    a segment's weighted exclusion cost divided by the temperature. Where it is a sizeable
+    fraction of T, a move's acceptance depends on its new segments' exact traversal sums, so
+    no cheap upper bound of them could accept the move without traversing.
+
 Times are the measuring thread's CPU time, as in ``kernel_throughput.py``.
 
 Usage: python benchmarks/kernel_profile.py [--n-terminals 1000] [--moves 200000] [--anneal fast] [--run-budget 0.1]
@@ -25,9 +30,11 @@ import argparse
 import json
 import time
 
+import numpy as np
 from kernel_throughput import ANNEAL_PRESETS, trajectory_problem
 
 from vasc_pipeline import engine, kernel
+from vasc_pipeline.physics import TABLE_EXCLUSION
 
 PHASES = {0.05: "start", 0.5: "middle", 0.95: "end"}  # share of the trajectory's moves: name
 
@@ -48,6 +55,14 @@ def ns_per_move(problem, arrays, model, moves: int) -> tuple[float, dict]:
         if c[proposed]:
             acceptance[name] = round(float(c[proposed + 1] / c[proposed]), 3)
     return elapsed / moves * 1e9, acceptance
+
+
+def exclusion_over_temperature(model, state, temp: float) -> dict[str, float]:
+    """Quantiles over the tree's segments of (weighted exclusion cost) / temperature."""
+    segments = np.arange(model.n_inlets, state.parent.size)
+    weights = model.w_exclusion * model.tables[TABLE_EXCLUSION, state.n_downstream[segments]]
+    costs = weights * state.seg_exclusion[segments]
+    return {f"q{q}": float(np.quantile(costs / temp, q / 100)) for q in (25, 50, 75, 90)}
 
 
 def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases=tuple(PHASES)) -> list[dict]:
@@ -77,6 +92,7 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases
             ns[name], acc[name] = ns_per_move(problem, arrays, model, moves)
         # Translations pick terminals and bifurcations equally often.
         ns["terminal_translate"] = 2 * ns["translate"] - ns["bifurcation_translate"]
+        temp = kernel.temperature(m, state, step)
         rows.append(
             {
                 "n_terminals": n_terminals,
@@ -84,9 +100,10 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases
                 "phase": PHASES.get(frac, f"{frac:g}"),
                 "run_steps": run_steps,
                 "step": step,
-                "temperature": kernel.temperature(m, state, step),
+                "temperature": temp,
                 "ns_per_move": {k: round(v) for k, v in ns.items()},
                 "acceptance_all_moves": acc["all"],
+                "exclusion_cost_over_temperature": exclusion_over_temperature(m, state, temp),
             }
         )
     return rows

@@ -31,6 +31,9 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
     if script.stem == "kernel_profile":
         assert {r["phase"] for r in records} == {"start", "middle", "end"}
         assert all(r["ns_per_move"]["all"] > 0 and r["ns_per_move"]["swap_without_exclusion"] > 0 for r in records)
+        for r in records:
+            quantiles = list(r["exclusion_cost_over_temperature"].values())
+            assert len(quantiles) == 4 and 0 <= quantiles[0] and quantiles == sorted(quantiles)
     if script.stem == "kernel_throughput":
         assert all(r["moves_per_second"] > 0 for r in records)
     if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
