@@ -326,7 +326,7 @@ def test_7_hydra_errors_exit_2_listing_the_accepted_options(tmp_path):
         ("tissue=liver", "accepted options for 'tissue': box, heart, mask, plane2d, sphere"),
         ("anneal.stepz=5", "unknown config key 'anneal.stepz'; accepted keys at anneal: name, T_start"),
         ("n_terminals=abc", "n_terminals: Value 'abc' of type 'str' could not be converted to Integer"),
-        ("+sweep=nope", "accepted options for 'sweep': convergence, mb_scan, size_scan, smoke"),
+        ("+sweep=nope", "accepted options for 'sweep': convergence, mb_scan, single, size_scan, smoke"),
     ]
     procs = [(cli(override, f"output_dir={tmp_path}"), text) for override, text in cases]
     for proc, text in procs:

@@ -1,4 +1,4 @@
-"""Sweep configs composed with hydra.compose, grid expansion and run ids (no Dask, no runs)."""
+"""Sweep configs composed with hydra.compose, grid expansion and run ids; the command's sweep axes in a dry run (no runs)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
+from helpers import TINY_RUN, cli, finish
 
 from vasc_pipeline import config, orchestrate, store, sweep
 from vasc_pipeline.config import ConfigError
@@ -24,7 +25,8 @@ def test_every_sweep_composes_and_expands_to_distinct_valid_jobs(name, tmp_path)
     jobs = sweep.expand(cfg)
     sw = cfg.sweep
     n_steps = len(sw.steps) if sw.steps else 1
-    assert len(jobs) == len(sw.n_terminals) * len(sw.m_b) * len(sw.seeds) * n_steps
+    axes = (sw.n_terminals or [cfg.n_terminals], sw.m_b or [cfg.physics.m_b], sw.seeds or [cfg.seed])
+    assert len(jobs) == math.prod(len(axis) for axis in axes) * n_steps
     assert len({j.run_id for j in jobs}) == len(jobs)
     for j in jobs:
         assert j.store == str(tmp_path / "runs" / f"{j.run_id}.zarr")
@@ -33,6 +35,38 @@ def test_every_sweep_composes_and_expands_to_distinct_valid_jobs(name, tmp_path)
         assert run.sweep is None and run.n_terminals == j.coords["n_terminals"]
         assert run.physics.m_b == j.coords["m_b"] and run.seed == j.coords["seed"]
         config.validate(run)
+
+
+def test_sweep_axes_without_a_sweep_run_the_base_config_on_them(tmp_path):
+    """``sweep.seeds=[...]`` alone (no +sweep=NAME) is the base config's job on those seeds,
+    not a Hydra traceback: the ``single`` sweep is selected for it."""
+    cfg = config.compose(["sweep.seeds=[0,1,2]", "sweep.m_b=[641.3,6413]", f"output_dir={tmp_path}"])
+    assert cfg.sweep.name == config.SINGLE_SWEEP and cfg.tissue.name == "heart"
+    jobs = sweep.expand(cfg)
+    assert {(j.coords["n_terminals"], j.coords["m_b"], j.coords["seed"]) for j in jobs} == {
+        (200, m_b, seed) for m_b in (641.3, 6413.0) for seed in (0, 1, 2)
+    }
+    assert config.compose(["+sweep=smoke", "sweep.seeds=[5]"]).sweep.name == "smoke"  # a chosen sweep stays
+    assert config.compose([]).sweep is None  # and no sweep key: no sweep
+    with pytest.raises(ConfigError, match=r"sweep\.seeds must be a non-empty list"):
+        sweep.expand(config.compose(["sweep.seeds=[]"]))
+
+
+def test_the_command_takes_sweep_axes_without_a_sweep(tmp_path):
+    """The README's ``sweep.seeds=[...]`` example as a user types it (a dry run: nothing runs)."""
+    code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "sweep.seeds=[0,1]", "cluster.dry_run=true"))
+    assert code == 0, output
+    assert "dry run: 2 runs of 2 would run" in output, output
+    assert "sphere-N16-mb641.3-s0 " in output and "sphere-N16-mb641.3-s1 " in output
+    assert not (tmp_path / "runs").exists()
+
+
+def test_with_sweep_group_adds_the_single_sweep_only_for_sweep_keys():
+    single = f"+sweep={config.SINGLE_SWEEP}"
+    assert config.with_sweep_group(["sweep.seeds=[0,1]"]) == [single, "sweep.seeds=[0,1]"]
+    assert config.with_sweep_group(["++sweep.m_b=[1.0]", "--cfg", "job"])[0] == single
+    for unchanged in (["seed=3"], ["+sweep=mb_scan", "sweep.seeds=[0]"], ["sweep=smoke"], ["--help"]):
+        assert config.with_sweep_group(unchanged) == unchanged
 
 
 def test_smoke_is_several_small_jobs_with_explicit_steps():

@@ -45,5 +45,6 @@ def _check_overrides(args: list[str]) -> None:
 
 
 if __name__ == "__main__":
+    sys.argv[1:] = config.with_sweep_group(sys.argv[1:])
     _check_overrides(sys.argv[1:])
     _main()

@@ -447,11 +447,25 @@ def register_schema() -> None:
     ConfigStore.instance().store(name="base_config", node=RunConfig)
 
 
+SINGLE_SWEEP = "single"  # conf/sweep/single.yaml: the base config's one job, axes from the command line
+
+
+def with_sweep_group(overrides: list[str] | tuple[str, ...]) -> list[str]:
+    """``overrides`` with ``+sweep=single`` in front when they set a ``sweep.*`` key without
+    choosing a sweep: ``sweep.seeds=[0,1,2,3]`` alone then runs the base config with those
+    seeds, where Hydra would fail on a key under the absent ``sweep`` node."""
+    keys = [o.lstrip("+~").partition("=")[0] for o in overrides if not o.startswith("-")]
+    if "sweep" not in keys and any(k.startswith("sweep.") for k in keys):
+        return [f"+sweep={SINGLE_SWEEP}", *overrides]
+    return list(overrides)
+
+
 def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config", check: bool = True) -> RunConfig:
     """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
 
     A Hydra-level error (unknown key or group option, wrong type, unparsable override) is a
     :class:`ConfigError` listing what is accepted; ``check=False`` skips :func:`validate`.
+    ``sweep.*`` keys without ``+sweep=NAME`` select the ``single`` sweep (:func:`with_sweep_group`).
     """
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
@@ -464,7 +478,7 @@ def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "con
         GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-            cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+            cfg = hydra_compose(config_name=config_name, overrides=with_sweep_group(overrides))
     except (HydraException, OmegaConfBaseException) as exc:
         raise ConfigError(hydra_error_message(exc)) from exc
     cfg = to_run_config(cfg)
