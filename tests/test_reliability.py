@@ -24,6 +24,7 @@ import zarr
 from helpers import ENV, FAST_ONE_EXPONENTIAL, TIMEOUT, TINY_RUN, cli, finish, free_port
 
 from vasc_pipeline import config, engine, job, orchestrate, store, sweep
+from vasc_pipeline.cluster import walltime_seconds, worker_lifetime
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tissue import TissueError
 
@@ -479,7 +480,71 @@ def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
     assert code == 0, output
     assert "dry run: 1 run of 1 would run" in output and "sphere-N16-mb641.3-s0 (2000 proposed moves; new)" in output
     assert "#SBATCH -t 01:00:00" in output and "distributed.cli.dask_worker" in output, output
+    # workers retire 6 minutes (10 %) before the walltime, give or take 90 s
+    assert "--lifetime 3240s --lifetime-stagger 90s" in output, output
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize(
+    "walltime, seconds, lifetime",
+    [
+        ("04:00:00", 14400, ("13500s", "225s")),  # a lead of 15 minutes at most
+        ("60", 3600, ("3240s", "90s")),  # minutes
+        ("90:30", 5430, ("4887s", "136s")),  # minutes:seconds
+        ("1-12", 129600, ("128700s", "225s")),  # days-hours
+        ("2-0:30:00", 174600, ("173700s", "225s")),
+        ("00:10:00", 600, ("480s", "30s")),  # a lead of 2 minutes at least
+        ("UNLIMITED", float("inf"), None),
+        (None, float("inf"), None),
+    ],
+)
+def test_10_slurm_workers_retire_before_the_walltime(walltime, seconds, lifetime):
+    assert walltime_seconds(walltime) == seconds
+    assert worker_lifetime(walltime) == lifetime
+
+
+@pytest.mark.parametrize(
+    "walltime, message",
+    [("4h", "must be a SLURM time limit such as 04:00:00"), ("1:2:3:4", "time limit"), ("00:05:00", "at least 10")],
+)
+def test_10_a_bad_walltime_is_refused_naming_the_field(walltime, message):
+    cfg = config.compose(["cluster=slurm", f"cluster.slurm.walltime={walltime}", "cluster.dry_run=true"])
+    with pytest.raises(ConfigError, match=rf"cluster\.slurm\.walltime .*{message}"):
+        orchestrate.check_cluster(cfg.cluster)
+
+
+def _resumable_work(progress: str, units: int) -> int:
+    """One unit a second, its progress kept in a file (as a run keeps its checkpoints)."""
+    path = Path(progress)
+    done = int(path.read_text()) if path.exists() else 0
+    while done < units:
+        time.sleep(1.0)
+        done += 1
+        path.write_text(str(done))
+    return done
+
+
+def test_10_a_task_whose_worker_retires_resumes_on_a_new_worker_without_counting_as_a_failure(tmp_path):
+    """What cluster=slurm relies on (cluster.worker_lifetime): a worker retiring at its
+    --lifetime is not a failure (allowed-failures 0 here), and adaptive scaling with
+    minimum = maximum starts a new worker, where the task resumes from its progress."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    progress = tmp_path / "progress"
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        with LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=True,
+            lifetime="4s",
+            lifetime_stagger="0s",
+            dashboard_address=None,
+            host="127.0.0.1",
+        ) as lc:
+            lc.adapt(minimum=1, maximum=1, interval="200ms")
+            with Client(lc) as client:
+                assert client.submit(_resumable_work, str(progress), 9, pure=False).result(timeout=120) == 9
 
 
 # -- 11. the package's own --help; the progress line ends before the summary ----------------------

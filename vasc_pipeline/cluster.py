@@ -87,6 +87,8 @@ def check_cluster(cluster: ClusterConfig) -> None:
         raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {cluster.address!r}")
     if cluster.name == "slurm" and cluster.slurm.cores < 1:
         raise ConfigError(f"cluster.slurm.cores must be an integer >= 1, got {cluster.slurm.cores}")
+    if cluster.name == "slurm":
+        worker_lifetime(cluster.slurm.walltime)  # raises for a walltime SLURM would not take or too short
     if not (cluster.startup_timeout > 0 and math.isfinite(cluster.startup_timeout)):
         raise ConfigError(
             f"cluster.startup_timeout must be a finite number of seconds > 0, got {cluster.startup_timeout}"
@@ -161,6 +163,60 @@ def _dashboard_options(cluster: ClusterConfig) -> dict:
     return {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 
 
+MIN_WALLTIME_SECONDS = 600.0  # a worker must outlive its start-up and a checkpoint interval or two
+
+
+NO_TIME_LIMIT = ("UNLIMITED", "INFINITE", "-1")  # sbatch --time values without a limit
+
+
+def walltime_seconds(walltime: str | None) -> float:
+    """Seconds of a SLURM time limit: minutes, minutes:seconds, hours:minutes:seconds, days-hours,
+    days-hours:minutes or days-hours:minutes:seconds (``sbatch --time``'s formats); infinite for
+    none (null, UNLIMITED, INFINITE, -1)."""
+    if walltime is None or str(walltime).strip().upper() in NO_TIME_LIMIT:
+        return math.inf
+    days, _, clock = str(walltime).strip().rpartition("-")
+    parts = clock.split(":")
+    try:
+        if not 1 <= len(parts) <= 3 or not all(p.isdigit() for p in parts) or (days and not days.isdigit()):
+            raise ValueError
+        values = [int(p) for p in parts]
+    except ValueError:
+        raise ConfigError(
+            f"cluster.slurm.walltime must be a SLURM time limit such as 04:00:00 or 1-12:00:00, got {walltime!r}"
+        ) from None
+    if days:  # days-hours[:minutes[:seconds]]
+        hours, minutes, seconds = (values + [0, 0])[:3]
+        hours += 24 * int(days)
+    elif len(values) == 3:
+        hours, minutes, seconds = values
+    else:  # minutes[:seconds]
+        hours, (minutes, seconds) = 0, (values + [0])[:2]
+    return float((hours * 60 + minutes) * 60 + seconds)
+
+
+def worker_lifetime(walltime: str | None) -> tuple[str, str] | None:
+    """``dask worker`` ``--lifetime`` and ``--lifetime-stagger`` for SLURM jobs of ``walltime``
+    (None without a time limit).
+
+    A worker retires gracefully a lead of 10 % of the walltime (2 to 15 minutes) before SLURM
+    would kill its job, give or take a quarter of the lead so that workers do not all leave at
+    once. A retired worker's run is rescheduled without counting as a failure (against
+    ``cluster.retries``) and resumes from its last checkpoint on a worker of a new job, which
+    adaptive scaling submits to keep ``n_workers`` workers (measured with a LocalCluster:
+    ``tests/test_reliability.py``).
+    """
+    total = walltime_seconds(walltime)
+    if math.isinf(total):
+        return None
+    if total < MIN_WALLTIME_SECONDS:
+        raise ConfigError(
+            f"cluster.slurm.walltime must be at least {MIN_WALLTIME_SECONDS / 60:g} minutes, got {walltime!r}"
+        )
+    lead = min(max(0.1 * total, 120.0), 900.0)
+    return f"{round(total - lead)}s", f"{round(lead / 4)}s"
+
+
 def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None = None) -> Any:
     """The dask-jobqueue SLURMCluster of ``cluster`` (its scheduler started, no job submitted yet).
 
@@ -175,6 +231,7 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
     security = _security(cluster, server=True)
     if security is None and not cluster.allow_insecure:
         security = Security.temporary()  # the scheduler listens beyond loopback: never in clear by default
+    lifetime = worker_lifetime(s.walltime)
     # One keyword per cluster.slurm key: the config uses dask-jobqueue's own names.
     cl = SLURMCluster(
         queue=s.queue,
@@ -192,6 +249,7 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
         protocol="tls://" if security else None,
         scheduler_options=_dashboard_options(cluster),
         shared_temp_directory=str(Path(output_dir).resolve()) if output_dir is not None else None,
+        worker_extra_args=["--lifetime", lifetime[0], "--lifetime-stagger", lifetime[1]] if lifetime else [],
     )
     return cl
 
@@ -230,7 +288,10 @@ def _client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLike |
             return
         if cluster.name == "slurm":
             cl = slurm_cluster(cluster, output_dir)
-            cl.scale(n=cluster.n_workers or n_jobs)
+            # Adaptive with minimum = maximum: a job that ends (its workers retire before the
+            # walltime, see worker_lifetime) is replaced by a new one, where a plain scale() is not.
+            n = cluster.n_workers or n_jobs
+            cl.adapt(minimum=n, maximum=n)
         else:
             n = cluster.n_workers or max(1, min(_cores(), n_jobs))
             cl = LocalCluster(
