@@ -137,6 +137,14 @@ def test_corrupted_checkpoint_falls_back_to_the_previous_good_one(tmp_path, dama
         cp = store.RunStore.open(s.path).load_checkpoint()
     assert (cp.name, cp.step, cp.trace_length) == ("c000000001", 10, 1)
     np.testing.assert_array_equal(cp.arrays["position"], state_like(1)["position"])
+    # The session resumed from the fallback keeps it as its own fallback; the bad one goes.
+    resumed = store.RunStore.open(s.path)
+    resumed.record_resume(cp)
+    resumed.write_checkpoint(state_like(3), step=30, trace_length=3, wall_seconds=3.0)
+    assert resumed._checkpoint_names() == ["c000000001", "c000000003"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert store.RunStore.open(s.path).load_checkpoint().name == "c000000003"
 
 
 def test_a_checkpoint_written_partially_is_never_used(tmp_path):

@@ -136,7 +136,11 @@ class CheckpointsMixin:
         return None
 
     def record_resume(self, checkpoint: Checkpoint | None) -> None:
-        """Note in the attributes where this session starts (step 0 for a fresh start)."""
+        """Note in the attributes where this session starts (step 0 for a fresh start).
+
+        The root pointer moves to the checkpoint resumed from, so that the next write keeps it
+        as the fallback and prunes a bad one that :meth:`load_checkpoint` passed over.
+        """
         entry = {"step": checkpoint.step if checkpoint else 0, "checkpoint": checkpoint.name if checkpoint else None}
         resumes = list(self.group.attrs.get("resumes", [])) + [entry]
         if checkpoint is None:  # a restart from scratch also forgets any committed progress
@@ -144,6 +148,7 @@ class CheckpointsMixin:
         else:
             self._set_attrs(
                 resumes=resumes,
+                checkpoint=checkpoint.name,
                 steps_done=checkpoint.step,
                 trace_length=checkpoint.trace_length,
                 wall_seconds=checkpoint.wall_seconds,
