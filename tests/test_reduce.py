@@ -24,6 +24,7 @@ import xarray as xr
 from vasc_pipeline import config, job, morphometry, orchestrate, store, sweep
 from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.reference import kassab_csv_path
+from vasc_pipeline.summary import write_summary
 
 REPO = Path(__file__).resolve().parents[1]
 GRID = [
@@ -468,3 +469,17 @@ def test_a_summary_over_several_tissues_gets_a_tissue_dim(tmp_path):
     assert set(frame["tissue"]) == {"plane2d", "sphere"}
     with pytest.raises(reduce_mod.ReductionError, match="different configurations"):
         reduce_mod.check_one_configuration(tmp_path, runs)  # one output_dir never mixes them
+
+
+def test_write_summary_swaps_in_the_new_summary_and_removes_a_crashed_write_s_leftovers(tmp_path):
+    path = tmp_path / "summary.zarr"
+    first = xr.DataTree(xr.Dataset({"x": ("i", np.arange(3.0), {"units": "1", "long_name": "x"})}))
+    write_summary(first, path)
+    # A crash between the two renames of an earlier reduction: no summary.zarr, the old one
+    # hidden beside it, and a partial temporary one of another.
+    os.replace(path, tmp_path / ".summary.zarr.old-4242")
+    (tmp_path / ".summary.zarr.tmp-4343").mkdir()
+    second = xr.DataTree(xr.Dataset({"x": ("i", np.arange(4.0), {"units": "1", "long_name": "x"})}))
+    write_summary(second, path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.zarr"]
+    assert xr.open_datatree(path, engine="zarr")["x"].size == 4

@@ -1,4 +1,5 @@
-"""Sweep configs composed with hydra.compose, grid expansion and run ids; the command's sweep axes in a dry run (no runs)."""
+"""Sweep configs composed with hydra.compose, grid expansion and run ids; the command's sweep
+axes in a dry run (no runs)."""
 
 from __future__ import annotations
 

@@ -445,17 +445,21 @@ def write_summary(tree: xr.DataTree, path: str | os.PathLike) -> Path:
     """Write the DataTree to Zarr (v3, consolidated) at ``path``, replacing any previous one.
 
     Written to a temporary directory beside ``path`` and swapped in by renames, so a crash
-    leaves either the old or the new summary readable, never a mix.
+    leaves either the old or the new summary readable, never a mix (between the two renames
+    the old one is readable only as ``.<name>.old-<pid>``). Leftovers of a crashed write are
+    removed (the output_dir lock means no other reduction is writing).
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     old = path.with_name(f".{path.name}.old-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
+    for leftover in path.parent.glob(f".{path.name}.tmp-*"):
+        shutil.rmtree(leftover, ignore_errors=True)
     with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
         warnings.simplefilter("ignore", UserWarning)
         tree.to_zarr(tmp, mode="w", consolidated=True, zarr_format=3)
     if path.exists():
         os.replace(path, old)
     os.replace(tmp, path)
-    shutil.rmtree(old, ignore_errors=True)
+    for previous in path.parent.glob(f".{path.name}.old-*"):  # this one, and any a crash left
+        shutil.rmtree(previous, ignore_errors=True)
     return path
