@@ -476,10 +476,15 @@ def test_write_summary_swaps_in_the_new_summary_and_removes_a_crashed_write_s_le
     first = xr.DataTree(xr.Dataset({"x": ("i", np.arange(3.0), {"units": "1", "long_name": "x"})}))
     write_summary(first, path)
     # A crash between the two renames of an earlier reduction: no summary.zarr, the old one
-    # hidden beside it, and a partial temporary one of another.
-    os.replace(path, tmp_path / ".summary.zarr.old-4242")
-    (tmp_path / ".summary.zarr.tmp-4343").mkdir()
+    # hidden beside it, and a partial temporary one of another crashed writer. A reduction
+    # still running beside this one (the test process's parent stands for it) keeps its files.
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    os.replace(path, tmp_path / f".summary.zarr.old-{dead.pid}")
+    (tmp_path / f".summary.zarr.tmp-{dead.pid}").mkdir()
+    running = tmp_path / f".summary.zarr.tmp-{os.getppid()}"
+    running.mkdir()
     second = xr.DataTree(xr.Dataset({"x": ("i", np.arange(4.0), {"units": "1", "long_name": "x"})}))
     write_summary(second, path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["summary.zarr", running.name])
     assert xr.open_datatree(path, engine="zarr")["x"].size == 4

@@ -164,8 +164,6 @@ def _dashboard_options(cluster: ClusterConfig) -> dict:
 
 
 MIN_WALLTIME_SECONDS = 600.0  # a worker must outlive its start-up and a checkpoint interval or two
-
-
 NO_TIME_LIMIT = ("UNLIMITED", "INFINITE", "-1")  # sbatch --time values without a limit
 
 
@@ -177,14 +175,11 @@ def walltime_seconds(walltime: str | None) -> float:
         return math.inf
     days, _, clock = str(walltime).strip().rpartition("-")
     parts = clock.split(":")
-    try:
-        if not 1 <= len(parts) <= 3 or not all(p.isdigit() for p in parts) or (days and not days.isdigit()):
-            raise ValueError
-        values = [int(p) for p in parts]
-    except ValueError:
+    if not 1 <= len(parts) <= 3 or not all(p.isdigit() for p in parts) or (days and not days.isdigit()):
         raise ConfigError(
             f"cluster.slurm.walltime must be a SLURM time limit such as 04:00:00 or 1-12:00:00, got {walltime!r}"
-        ) from None
+        )
+    values = [int(p) for p in parts]
     if days:  # days-hours[:minutes[:seconds]]
         hours, minutes, seconds = (values + [0, 0])[:3]
         hours += 24 * int(days)

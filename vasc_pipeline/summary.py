@@ -446,20 +446,38 @@ def write_summary(tree: xr.DataTree, path: str | os.PathLike) -> Path:
 
     Written to a temporary directory beside ``path`` and swapped in by renames, so a crash
     leaves either the old or the new summary readable, never a mix (between the two renames
-    the old one is readable only as ``.<name>.old-<pid>``). Leftovers of a crashed write are
-    removed (the output_dir lock means no other reduction is writing).
+    the old one is readable only as ``.<name>.old-<pid>``). Leftovers of writers that no
+    longer run are removed; a reduction running beside this one (``+stage=reduce`` during a
+    sweep) keeps its own.
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     old = path.with_name(f".{path.name}.old-{os.getpid()}")
-    for leftover in path.parent.glob(f".{path.name}.tmp-*"):
-        shutil.rmtree(leftover, ignore_errors=True)
+    _remove_leftovers(path, "tmp")
     with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
         warnings.simplefilter("ignore", UserWarning)
         tree.to_zarr(tmp, mode="w", consolidated=True, zarr_format=3)
     if path.exists():
         os.replace(path, old)
     os.replace(tmp, path)
-    for previous in path.parent.glob(f".{path.name}.old-*"):  # this one, and any a crash left
-        shutil.rmtree(previous, ignore_errors=True)
+    shutil.rmtree(old, ignore_errors=True)
+    _remove_leftovers(path, "old")
     return path
+
+
+def _remove_leftovers(path: Path, kind: str) -> None:
+    """Remove ``.<name>.<kind>-<pid>`` directories beside ``path`` whose process has ended."""
+    for leftover in path.parent.glob(f".{path.name}.{kind}-*"):
+        pid = leftover.name.rpartition("-")[2]
+        if pid.isdigit() and not _process_alive(int(pid)):
+            shutil.rmtree(leftover, ignore_errors=True)
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
