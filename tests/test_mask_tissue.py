@@ -123,3 +123,16 @@ def test_q_required_sets_the_supply_radius_and_the_voxel_size():
     assert p.model.supply_rho == pytest.approx(tissue.VOXELS_PER_SUPPLY_RADIUS, rel=1e-12)
     with pytest.raises(config.ConfigError, match="tissue.q_required"):
         make_problem("tissue=sphere", "tissue.q_required=-1")
+
+
+def test_inlets_may_be_written_as_whole_numbers():
+    """``[[0,0,0.019]]`` is as good as ``[[0.0,0.0,0.019]]`` (Hydra types a bare 0 as an int)."""
+    cfg = config.compose(["tissue=mask", "tissue.path=/nonexistent.npy", "tissue.inlets=[[0,0,0.019]]"], check=False)
+    assert config.validate(cfg).tissue.inlets == [[0.0, 0.0, 0.019]]
+
+
+def test_a_terminal_sites_path_that_is_a_directory_names_the_field(tmp_path):
+    from vasc_pipeline.tree import TreeError, load_terminal_sites
+
+    with pytest.raises(TreeError, match=r"terminals\.path: cannot read .*Is a directory"):
+        load_terminal_sites(str(tmp_path), tissue=None)

@@ -151,6 +151,13 @@ def test_3_empty_output_dir_is_refused_and_reduce_never_creates_its_directory(tm
         ("checkpoint.every_seconds=1e9", r"checkpoint\.every_seconds must be <= 604800"),
         ("anneal.steps_at_1000=1e30", r"anneal\.steps_at_1000=1e\+30 schedules"),
         ("cluster.startup_timeout=0", r"cluster\.startup_timeout must be a finite number of seconds > 0"),
+        ("anneal.calibration_samples=1000000000", r"anneal\.calibration_samples must be an integer in \[1, 1e\+07\]"),
+        ("physics.pressure_terminal=20000", r"physics\.pressure_inlet must exceed physics\.pressure_terminal"),
+        ("physics.pressure_inlet=-5", r"physics\.pressure_inlet must exceed"),
+        ("tissue=mask tissue.inlets=[[0,0]]", r"tissue\.inlets\[0\] must be an \[x, y, z\] position"),
+        ("tissue=mask tissue.inlets=[]", r"tissue\.inlets must hold at least one"),
+        ("cluster=slurm cluster.dry_run=true cluster.slurm.memory=lots", r"cluster\.slurm\.memory must be an amount"),
+        ("cluster=slurm cluster.dry_run=true cluster.slurm.interface=nonexistent0", r"cluster\.slurm\.interface"),
     ],
 )
 def test_4_upper_bounds_are_validated(override, message, tmp_path):

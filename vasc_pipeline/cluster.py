@@ -88,7 +88,7 @@ def check_cluster(cluster: ClusterConfig) -> None:
     if cluster.name == "slurm" and cluster.slurm.cores < 1:
         raise ConfigError(f"cluster.slurm.cores must be an integer >= 1, got {cluster.slurm.cores}")
     if cluster.name == "slurm":
-        worker_lifetime(cluster.slurm.walltime)  # raises for a walltime SLURM would not take or too short
+        _check_slurm_resources(cluster.slurm)
     if not (cluster.startup_timeout > 0 and math.isfinite(cluster.startup_timeout)):
         raise ConfigError(
             f"cluster.startup_timeout must be a finite number of seconds > 0, got {cluster.startup_timeout}"
@@ -108,6 +108,26 @@ def check_cluster(cluster: ClusterConfig) -> None:
                 "cluster=slurm submits jobs with sbatch, which is not on PATH here: run the sweep on "
                 "a SLURM login node (cluster.dry_run=true prints the job script without submitting)"
             )
+
+
+def _check_slurm_resources(s: Any) -> None:
+    """cluster.slurm's walltime, memory and interface, which dask-jobqueue would only reject with a
+    traceback once the scheduler starts (the interface is the scheduler's too, so it must exist here)."""
+    import psutil
+    from dask.utils import parse_bytes
+
+    worker_lifetime(s.walltime)  # raises for a walltime SLURM would not take, or one too short
+    try:
+        memory = parse_bytes(s.memory)
+    except (ValueError, TypeError):
+        memory = 0
+    if memory <= 0:
+        raise ConfigError(f"cluster.slurm.memory must be an amount per job such as 4GB or 500MB, got {s.memory!r}")
+    if s.interface is not None and s.interface not in psutil.net_if_addrs():
+        raise ConfigError(
+            f"cluster.slurm.interface {s.interface!r} is not a network interface of this machine (the "
+            f"scheduler's); accepted: {', '.join(sorted(psutil.net_if_addrs()))}, or null"
+        )
 
 
 def has_bokeh() -> bool:

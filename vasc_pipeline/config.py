@@ -48,6 +48,7 @@ PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps 
 # Upper bounds, so that a typo'd exponent is refused here rather than overflowing after dispatch
 # (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
 MAX_STEPS = 10**15
+MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
@@ -105,7 +106,7 @@ class TissueConfig:
     path: Optional[str] = None  # mask: .npy file or Zarr array
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
-    inlets: Optional[list[list[float]]] = None  # mask: inlet positions, m
+    inlets: Optional[list[list[Any]]] = None  # mask: inlet positions [x, y, z], m (numbers; checked by validate)
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
     exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
@@ -287,6 +288,24 @@ def validate(cfg: RunConfig) -> RunConfig:
                 raise ConfigError(f"sweep.seeds[{i}] must be {SEED_ACCEPTED}, got {seed!r}")
     if not isinstance(cfg.n_terminals, int) or cfg.n_terminals < 2:
         raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
+    if cfg.tissue.inlets is not None:
+        if not cfg.tissue.inlets:
+            raise ConfigError("tissue.inlets must hold at least one [x, y, z] position in metres (or be null), got []")
+        for k, p in enumerate(cfg.tissue.inlets):
+            if not (
+                isinstance(p, (list, tuple))
+                and len(p) == 3
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+            ):
+                raise ConfigError(f"tissue.inlets[{k}] must be an [x, y, z] position in metres, got {p!r}")
+        cfg.tissue.inlets = [[float(v) for v in p] for p in cfg.tissue.inlets]
+        _check_finite(cfg.tissue.inlets, "tissue.inlets")
+    phys = cfg.physics
+    if not phys.pressure_inlet > phys.pressure_terminal >= 0.0:
+        raise ConfigError(
+            "physics.pressure_inlet must exceed physics.pressure_terminal, which must be >= 0 (Pa; blood "
+            f"flows from the inlets to the terminals), got {phys.pressure_inlet:g} and {phys.pressure_terminal:g}"
+        )
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
     if cfg.tissue.inlet_assignment not in INLET_ASSIGNMENTS:
@@ -366,8 +385,10 @@ def validate(cfg: RunConfig) -> RunConfig:
             f"anneal.polish_swaps_max_terminals must be an integer >= 0, got {a.polish_swaps_max_terminals}"
         )
     for name in ("calibration_samples", "adapt_window"):
-        if not isinstance(getattr(a, name), int) or getattr(a, name) < 1:
-            raise ConfigError(f"anneal.{name} must be an integer >= 1, got {getattr(a, name)}")
+        if not isinstance(getattr(a, name), int) or not 1 <= getattr(a, name) <= MAX_CALIBRATION_SAMPLES:
+            raise ConfigError(
+                f"anneal.{name} must be an integer in [1, {MAX_CALIBRATION_SAMPLES:.0e}], got {getattr(a, name)}"
+            )
     if not 0.0 <= a.p_local <= 1.0:
         raise ConfigError(f"anneal.p_local must lie in [0, 1], got {a.p_local}")
     if a.steps is not None and (not isinstance(a.steps, int) or not 1 <= a.steps <= MAX_STEPS):

@@ -269,6 +269,8 @@ def load_terminal_sites(path: str, tissue: Tissue) -> np.ndarray:
         sites = frame[["x", "y", "z"]].to_numpy(dtype=np.float64)
     except FileNotFoundError as exc:
         raise TreeError(f"terminals.path: file {path!r} does not exist") from exc
+    except OSError as exc:  # a directory, no permission, ...
+        raise TreeError(f"terminals.path: cannot read {path!r}: {exc.strerror or exc}") from exc
     except (ValueError, pd.errors.ParserError) as exc:
         raise TreeError(f"terminals.path: cannot read {path!r} as x, y, z in metres: {exc}") from exc
     if len(sites) < 2:
