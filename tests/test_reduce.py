@@ -11,6 +11,7 @@ import io
 import itertools
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -346,7 +347,9 @@ def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):
     assert costs.seed.values.tolist() == [0]
     # a second reduction replaces the summary in place
     reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
-    assert sorted(p.name for p in tmp_path.iterdir() if "summary.zarr" in p.name) == ["summary.zarr"]
+    # the swap leaves no copy behind, only its (hidden) lock file
+    left = sorted(p.name for p in tmp_path.iterdir() if "summary.zarr" in p.name)
+    assert left == [".summary.zarr.lock", "summary.zarr"]
 
 
 def test_sweep_reduces_at_the_end_and_a_failed_reduction_loses_no_run(tmp_path, monkeypatch):
@@ -478,13 +481,16 @@ def test_write_summary_swaps_in_the_new_summary_and_removes_a_crashed_write_s_le
     # A crash between the two renames of an earlier reduction: no summary.zarr, the old one
     # hidden beside it, and a partial temporary one of another crashed writer. A reduction
     # still running beside this one (the test process's parent stands for it) keeps its files.
+    # Another host's writer is never judged from here.
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    os.replace(path, tmp_path / f".summary.zarr.old-{dead.pid}")
-    (tmp_path / f".summary.zarr.tmp-{dead.pid}").mkdir()
-    running = tmp_path / f".summary.zarr.tmp-{os.getppid()}"
-    running.mkdir()
+    host = socket.gethostname()
+    os.replace(path, tmp_path / f".summary.zarr.old-{host}-{dead.pid}")
+    (tmp_path / f".summary.zarr.tmp-{host}-{dead.pid}").mkdir()
+    kept = [f".summary.zarr.tmp-{host}-{os.getppid()}", f".summary.zarr.tmp-{host}x-{dead.pid}"]
+    for name in kept:
+        (tmp_path / name).mkdir()
     second = xr.DataTree(xr.Dataset({"x": ("i", np.arange(4.0), {"units": "1", "long_name": "x"})}))
     write_summary(second, path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["summary.zarr", running.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([".summary.zarr.lock", "summary.zarr", *kept])
     assert xr.open_datatree(path, engine="zarr")["x"].size == 4

@@ -502,7 +502,6 @@ def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
         ("2-0:30:00", 174600, ("173700s", "225s")),
         ("00:10:00", 600, ("480s", "30s")),  # a lead of 2 minutes at least
         ("UNLIMITED", float("inf"), None),
-        (None, float("inf"), None),
     ],
 )
 def test_10_slurm_workers_retire_before_the_walltime(walltime, seconds, lifetime):

@@ -66,7 +66,8 @@ def test_with_sweep_group_adds_the_single_sweep_only_for_sweep_keys():
     single = f"+sweep={config.SINGLE_SWEEP}"
     assert config.with_sweep_group(["sweep.seeds=[0,1]"]) == [single, "sweep.seeds=[0,1]"]
     assert config.with_sweep_group(["++sweep.m_b=[1.0]", "--cfg", "job"])[0] == single
-    for unchanged in (["seed=3"], ["+sweep=mb_scan", "sweep.seeds=[0]"], ["sweep=smoke"], ["--help"]):
+    unchanged_cases = (["seed=3"], ["+sweep=mb_scan", "sweep.seeds=[0]"], ["+sweep@_global_=smoke", "sweep.seeds=[0]"])
+    for unchanged in (*unchanged_cases, ["sweep=smoke"], ["--help"]):
         assert config.with_sweep_group(unchanged) == unchanged
 
 

@@ -184,14 +184,14 @@ def _dashboard_options(cluster: ClusterConfig) -> dict:
 
 
 MIN_WALLTIME_SECONDS = 600.0  # a worker must outlive its start-up and a checkpoint interval or two
-NO_TIME_LIMIT = ("UNLIMITED", "INFINITE", "-1")  # sbatch --time values without a limit
+NO_TIME_LIMIT = ("UNLIMITED", "INFINITE")  # sbatch --time values without a limit of their own
 
 
-def walltime_seconds(walltime: str | None) -> float:
+def walltime_seconds(walltime: str) -> float:
     """Seconds of a SLURM time limit: minutes, minutes:seconds, hours:minutes:seconds, days-hours,
     days-hours:minutes or days-hours:minutes:seconds (``sbatch --time``'s formats); infinite for
-    none (null, UNLIMITED, INFINITE, -1)."""
-    if walltime is None or str(walltime).strip().upper() in NO_TIME_LIMIT:
+    UNLIMITED or INFINITE (the partition's own limit then applies, unknown here)."""
+    if str(walltime).strip().upper() in NO_TIME_LIMIT:
         return math.inf
     days, _, clock = str(walltime).strip().rpartition("-")
     parts = clock.split(":")
@@ -210,9 +210,9 @@ def walltime_seconds(walltime: str | None) -> float:
     return float((hours * 60 + minutes) * 60 + seconds)
 
 
-def worker_lifetime(walltime: str | None) -> tuple[str, str] | None:
+def worker_lifetime(walltime: str) -> tuple[str, str] | None:
     """``dask worker`` ``--lifetime`` and ``--lifetime-stagger`` for SLURM jobs of ``walltime``
-    (None without a time limit).
+    (None for UNLIMITED: workers then run until the partition's limit ends their job).
 
     A worker retires gracefully a lead of 10 % of the walltime (2 to 15 minutes) before SLURM
     would kill its job, give or take a quarter of the lead so that workers do not all leave at
@@ -264,7 +264,8 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
         protocol="tls://" if security else None,
         scheduler_options=_dashboard_options(cluster),
         shared_temp_directory=str(Path(output_dir).resolve()) if output_dir is not None else None,
-        worker_extra_args=["--lifetime", lifetime[0], "--lifetime-stagger", lifetime[1]] if lifetime else [],
+        # None keeps any jobqueue.slurm.worker-extra-args of the user's dask config.
+        worker_extra_args=["--lifetime", lifetime[0], "--lifetime-stagger", lifetime[1]] if lifetime else None,
     )
     return cl
 
@@ -305,8 +306,9 @@ def _client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLike |
             cl = slurm_cluster(cluster, output_dir)
             # Adaptive with minimum = maximum: a job that ends (its workers retire before the
             # walltime, see worker_lifetime) is replaced by a new one, where a plain scale() is not.
-            n = cluster.n_workers or n_jobs
-            cl.adapt(minimum=n, maximum=n)
+            # Counted in whole jobs, so that adapt never cancels part of a job of several workers.
+            jobs = math.ceil((cluster.n_workers or n_jobs) / cluster.slurm.cores)
+            cl.adapt(minimum_jobs=jobs, maximum_jobs=jobs)
         else:
             n = cluster.n_workers or max(1, min(_cores(), n_jobs))
             cl = LocalCluster(

@@ -299,7 +299,6 @@ def validate(cfg: RunConfig) -> RunConfig:
             ):
                 raise ConfigError(f"tissue.inlets[{k}] must be an [x, y, z] position in metres, got {p!r}")
         cfg.tissue.inlets = [[float(v) for v in p] for p in cfg.tissue.inlets]
-        _check_finite(cfg.tissue.inlets, "tissue.inlets")
     phys = cfg.physics
     if not phys.pressure_inlet > phys.pressure_terminal >= 0.0:
         raise ConfigError(
@@ -475,7 +474,7 @@ def with_sweep_group(overrides: list[str] | tuple[str, ...]) -> list[str]:
     """``overrides`` with ``+sweep=single`` in front when they set a ``sweep.*`` key without
     choosing a sweep: ``sweep.seeds=[0,1,2,3]`` alone then runs the base config with those
     seeds, where Hydra would fail on a key under the absent ``sweep`` node."""
-    keys = [o.lstrip("+~").partition("=")[0] for o in overrides if not o.startswith("-")]
+    keys = [o.lstrip("+~").partition("=")[0].partition("@")[0] for o in overrides if not o.startswith("-")]
     if "sweep" not in keys and any(k.startswith("sweep.") for k in keys):
         return [f"+sweep={SINGLE_SWEEP}", *overrides]
     return list(overrides)

@@ -46,7 +46,7 @@ class SlurmConfig:
 
     queue: Optional[str] = None  # partition (-p)
     account: Optional[str] = None  # -A
-    walltime: Optional[str] = "04:00:00"  # per SLURM job (null or UNLIMITED: none); workers retire before it
+    walltime: str = "04:00:00"  # per SLURM job (sbatch --time formats); workers retire before it
     cores: int = 1  # worker processes (one thread each) per SLURM job
     memory: str = "4GB"  # per SLURM job
     interface: Optional[str] = None  # network interface of the workers, e.g. ib0

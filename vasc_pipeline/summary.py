@@ -34,6 +34,7 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import shutil
+import socket
 import warnings
 from pathlib import Path
 
@@ -44,7 +45,7 @@ from . import morphometry as _m
 from .reference import ARTERIES, kassab_dataset
 from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
 from .similarity import main_trunks, tortuosity, trunk_spread
-from .store import TRACE_FIELDS, RunStore
+from .store import TRACE_FIELDS, RunStore, file_lock
 
 __all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
 
@@ -446,28 +447,30 @@ def write_summary(tree: xr.DataTree, path: str | os.PathLike) -> Path:
 
     Written to a temporary directory beside ``path`` and swapped in by renames, so a crash
     leaves either the old or the new summary readable, never a mix (between the two renames
-    the old one is readable only as ``.<name>.old-<pid>``). Leftovers of writers that no
-    longer run are removed; a reduction running beside this one (``+stage=reduce`` during a
-    sweep) keeps its own.
+    the old one is readable only as ``.<name>.old-<host>-<pid>``). The swap holds a lock, as
+    ``+stage=reduce`` may run beside a sweep's own reduction; leftovers of writers on this
+    host that no longer run are removed (the output_dir may be shared with other hosts).
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    old = path.with_name(f".{path.name}.old-{os.getpid()}")
+    writer = f"{socket.gethostname()}-{os.getpid()}"
+    tmp = path.with_name(f".{path.name}.tmp-{writer}")
+    old = path.with_name(f".{path.name}.old-{writer}")
     _remove_leftovers(path, "tmp")
     with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
         warnings.simplefilter("ignore", UserWarning)
         tree.to_zarr(tmp, mode="w", consolidated=True, zarr_format=3)
-    if path.exists():
-        os.replace(path, old)
-    os.replace(tmp, path)
+    with file_lock(path.with_name(f".{path.name}.lock")):
+        if path.exists():
+            os.replace(path, old)
+        os.replace(tmp, path)
     shutil.rmtree(old, ignore_errors=True)
     _remove_leftovers(path, "old")
     return path
 
 
 def _remove_leftovers(path: Path, kind: str) -> None:
-    """Remove ``.<name>.<kind>-<pid>`` directories beside ``path`` whose process has ended."""
-    for leftover in path.parent.glob(f".{path.name}.{kind}-*"):
+    """Remove ``.<name>.<kind>-<host>-<pid>`` directories of this host whose process has ended."""
+    for leftover in path.parent.glob(f".{path.name}.{kind}-{socket.gethostname()}-*"):
         pid = leftover.name.rpartition("-")[2]
         if pid.isdigit() and not _process_alive(int(pid)):
             shutil.rmtree(leftover, ignore_errors=True)
