@@ -167,6 +167,14 @@ def test_4_upper_bounds_are_validated(override, message, tmp_path):
         sweep.expand(cfg)  # the grid's axes (what orchestrate.plan checks before any store or job)
 
 
+def test_4_a_given_T_start_below_the_calibrated_T_end_is_refused_before_any_job():
+    """T_end from anneal.T_end_rel needs the problem's physics: the check runs where problems
+    are built, before any store or job."""
+    cfg = config.compose(["tissue=sphere", "n_terminals=16", "anneal.T_start=1e-15"])
+    with pytest.raises(ConfigError, match=r"anneal\.T_start=1e-15 W must exceed the end temperature"):
+        engine.build_problem(cfg)
+
+
 def test_4_a_scheduler_without_workers_stops_after_the_startup_timeout(tmp_path):
     port = free_port()
     scheduler = subprocess.Popen(

@@ -154,6 +154,12 @@ def build_problem(config: Any) -> Problem:
             f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
             "cells (at most 2e7); use a larger value (in R_supply; fast: 2, paper and fast_v1: 1)"
         )
+    if a.T_start is not None and not a.T_start > scheduled_T_end(a, physics):
+        where = "anneal.T_end" if a.T_end is not None else f"anneal.T_end_rel={a.T_end_rel:g} times w(1) R_supply"
+        raise ConfigError(
+            f"anneal.T_start={a.T_start:g} W must exceed the end temperature, {scheduled_T_end(a, physics):.4g} W "
+            f"({where}, at n_terminals={n}); the schedule would warm up"
+        )
     rho = physics.supply_radius / tissue.voxel_size
     if rho < 1.0:  # the supply term counts voxels within R_supply of a terminal: it needs several
         raise TissueError(
@@ -285,6 +291,15 @@ def state_from_tree(problem: Problem, tree: Tree, rng: np.ndarray) -> kernel.Sta
     return state
 
 
+def scheduled_T_end(anneal: Any, physics: Physics) -> float:
+    """The schedule's end temperature [W]: ``anneal.T_end``, or ``anneal.T_end_rel`` times the cost
+    of one terminal segment of length R_supply (see :func:`calibrate_schedule`)."""
+    if anneal.T_end is not None:
+        return float(anneal.T_end)
+    tables = cost_tables(physics)
+    return anneal.T_end_rel * float(tables.volume[1] + tables.power[1]) * physics.supply_radius
+
+
 def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, float]:
     """(T_start, T_end) [W] from the cost scale of the problem; configured values are kept.
 
@@ -297,12 +312,7 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
     so colder steps would be wasted. T_start is raised to 10 T_end if it came out lower.
     """
     a = problem.config.anneal
-    tables = cost_tables(problem.physics)
-    t_end = (
-        a.T_end
-        if a.T_end is not None
-        else a.T_end_rel * float(tables.volume[1] + tables.power[1]) * problem.physics.supply_radius
-    )
+    t_end = scheduled_T_end(a, problem.physics)
     if a.T_start is not None:
         return float(a.T_start), float(t_end)
     walker = restore_state(problem, state_arrays(state))
