@@ -85,8 +85,6 @@ def check_cluster(cluster: ClusterConfig) -> None:
         )
     if cluster.address and "://" not in cluster.address:
         raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {cluster.address!r}")
-    if cluster.name == "slurm" and cluster.slurm.cores < 1:
-        raise ConfigError(f"cluster.slurm.cores must be an integer >= 1, got {cluster.slurm.cores}")
     if cluster.name == "slurm":
         _check_slurm_resources(cluster.slurm)
     if not (cluster.startup_timeout > 0 and math.isfinite(cluster.startup_timeout)):
@@ -111,11 +109,14 @@ def check_cluster(cluster: ClusterConfig) -> None:
 
 
 def _check_slurm_resources(s: Any) -> None:
-    """cluster.slurm's walltime, memory and interface, which dask-jobqueue would only reject with a
-    traceback once the scheduler starts (the interface is the scheduler's too, so it must exist here)."""
+    """cluster.slurm's cores, walltime, memory and interface, which dask-jobqueue would only reject
+    with a traceback once the scheduler starts (the interface is the scheduler's too, so it must
+    exist here)."""
     import psutil
     from dask.utils import parse_bytes
 
+    if s.cores < 1:
+        raise ConfigError(f"cluster.slurm.cores must be an integer >= 1, got {s.cores}")
     worker_lifetime(s.walltime)  # raises for a walltime SLURM would not take, or one too short
     try:
         memory = parse_bytes(s.memory)
@@ -123,10 +124,11 @@ def _check_slurm_resources(s: Any) -> None:
         memory = 0
     if memory <= 0:
         raise ConfigError(f"cluster.slurm.memory must be an amount per job such as 4GB or 500MB, got {s.memory!r}")
-    if s.interface is not None and s.interface not in psutil.net_if_addrs():
+    interfaces = psutil.net_if_addrs()
+    if s.interface is not None and s.interface not in interfaces:
         raise ConfigError(
             f"cluster.slurm.interface {s.interface!r} is not a network interface of this machine (the "
-            f"scheduler's); accepted: {', '.join(sorted(psutil.net_if_addrs()))}, or null"
+            f"scheduler's); accepted: {', '.join(sorted(interfaces))}, or null"
         )
 
 

@@ -154,10 +154,11 @@ def build_problem(config: Any) -> Problem:
             f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
             "cells (at most 2e7); use a larger value (in R_supply; fast: 2, paper and fast_v1: 1)"
         )
-    if a.T_start is not None and not a.T_start > scheduled_T_end(a, physics):
+    t_end = scheduled_T_end(a, physics)
+    if a.T_start is not None and not a.T_start > t_end:
         where = "anneal.T_end" if a.T_end is not None else f"anneal.T_end_rel={a.T_end_rel:g} times w(1) R_supply"
         raise ConfigError(
-            f"anneal.T_start={a.T_start:g} W must exceed the end temperature, {scheduled_T_end(a, physics):.4g} W "
+            f"anneal.T_start={a.T_start:g} W must exceed the end temperature, {t_end:.4g} W "
             f"({where}, at n_terminals={n}); the schedule would warm up"
         )
     rho = physics.supply_radius / tissue.voxel_size

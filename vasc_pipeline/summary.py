@@ -39,6 +39,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import psutil
 import xarray as xr
 
 from . import morphometry as _m
@@ -472,15 +473,5 @@ def _remove_leftovers(path: Path, kind: str) -> None:
     """Remove ``.<name>.<kind>-<host>-<pid>`` directories of this host whose process has ended."""
     for leftover in path.parent.glob(f".{path.name}.{kind}-{socket.gethostname()}-*"):
         pid = leftover.name.rpartition("-")[2]
-        if pid.isdigit() and not _process_alive(int(pid)):
+        if pid.isdigit() and not psutil.pid_exists(int(pid)):
             shutil.rmtree(leftover, ignore_errors=True)
-
-
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
