@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import logging
 from dataclasses import asdict
 
@@ -9,9 +10,16 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from vasc_pipeline.config import ConfigError, compose, to_run_config, validate
+from vasc_pipeline.config import (
+    TISSUE_KEYS_OF_EVERY_TISSUE,
+    ConfigError,
+    TissueConfig,
+    compose,
+    to_run_config,
+    validate,
+)
 from vasc_pipeline.identity import config_hash
-from vasc_pipeline.tissue import TissueError, build_tissue, heart
+from vasc_pipeline.tissue import TISSUES, TissueError, build_tissue, heart
 
 TARGET_G = 218.0
 DENSITY = 1.06e3
@@ -241,14 +249,48 @@ def test_ostium_height_places_both_ostia_above_the_base_in_metres(dims):
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["tissue=sphere", "tissue.ostium_height=0.01"], "tissue=sphere is not the heart"),
-        (["tissue=box", "tissue.base_cut=0.2"], r"tissue.base_cut shapes the heart; tissue=box is not the heart"),
-        (["tissue=plane2d", "tissue.elongation=1.2"], "tissue.elongation shapes the heart"),
+        (["tissue=sphere", "tissue.ostium_height=0.01"], r"tissue.ostium_height is read by tissue=heart only; "),
+        (["tissue=box", "tissue.base_cut=0.2"], r"tissue.base_cut .* tissue=box ignores it: .* default \(null\)"),
+        (["tissue=plane2d", "tissue.elongation=1.2"], "tissue.elongation is read by tissue=heart only"),
+        (["tissue=sphere", "tissue.mass_g=109"], r"tissue.mass_g .* leave it at its default \(218.0\)"),
+        (
+            [
+                "tissue=mask",
+                "tissue.path=m.npy",
+                "tissue.voxel_size=1e-3",
+                "tissue.inlets=[[0,0,0]]",
+                "tissue.exclude_cavities=false",
+            ],
+            r"tissue.exclude_cavities .* tissue=mask ignores it: .*\(true\)",
+        ),
+        (["tissue.inlets=[[0,0,0.01]]"], r"tissue.inlets is read by tissue=mask only; tissue=heart ignores it"),
+        (["tissue.radius=0.03"], r"tissue.radius is read by tissue=sphere only"),
+        (["tissue=sphere", "tissue.size=[0.02,0.02,0.02]"], r"tissue.size is read by tissue=box only"),
+        (["tissue=box", "tissue.side=0.2"], r"tissue.side is read by tissue=plane2d only"),
     ],
 )
-def test_heart_options_on_other_tissues_are_refused_naming_the_field(overrides, message):
+def test_keys_the_tissue_does_not_read_are_refused_naming_the_field(overrides, message):
     with pytest.raises(ConfigError, match=message):
-        validate(to_run_config(compose(overrides)))
+        validate(to_run_config(compose(overrides, check=False)))
+
+
+def test_every_tissue_key_applies_to_every_tissue_or_is_read_by_a_tissue_builder():
+    read = set().union(*(inspect.signature(build).parameters for build in TISSUES.values()))
+    for key in TissueConfig.__dataclass_fields__:
+        assert key in TISSUE_KEYS_OF_EVERY_TISSUE or key in read, key
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["tissue.mass_g=109", "tissue.exclude_cavities=false", "tissue.q_required=0.02", "tissue.voxel_size=1e-3"],
+        ["tissue=sphere", "tissue.radius=0.03", "tissue.bifurcation_reach=0", "tissue.mass_g=218"],
+        ["tissue=box", "tissue.size=[0.02,0.02,0.01]", "tissue.inlet_assignment=nearest"],
+        ["tissue=plane2d", "tissue.side=0.2", "tissue.voxel_size=1e-3"],
+    ],
+)
+def test_keys_the_tissue_reads_and_defaults_are_accepted(overrides):
+    validate(to_run_config(compose(overrides, check=False)))
 
 
 @pytest.mark.parametrize("key, value", [("ostium_height", 0.01), ("base_cut", 0.2), ("elongation", 1.3)])

@@ -397,6 +397,16 @@ def test_8_a_sweep_leaves_damaged_stores_out_naming_them_and_runs_the_others(tmp
     assert {k: v for k, v in after.items() if fresh.run_id not in k} == before  # the damaged ones left as they were
 
 
+def test_8_the_reduce_stage_validates_its_config_before_reading_anything(tmp_path):
+    (tmp_path / store.RUNS_DIR).mkdir()
+    bad = config.compose([*TINY_RUN, f"output_dir={tmp_path}", "+stage=reduce", "physics.m_b=-1"], check=False)
+    log = io.StringIO()
+    assert orchestrate.reduce_stage(bad, stream=log) == 2
+    assert "physics.m_b must be a finite number > 0, got -1.0" in log.getvalue(), log.getvalue()
+    assert "Nothing was reduced" in log.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [store.RUNS_DIR]
+
+
 def test_8_the_reduction_names_damaged_stores_and_exits_1(tmp_path):
     jobs = run_in_process(tmp_path, *THREE_SEEDS)
     costs = {j.run_id: store.RunStore.open(j.store, mode="r").attrs["cost"]["total"] for j in jobs}

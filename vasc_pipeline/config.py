@@ -10,6 +10,8 @@ it is the only function here that touches Hydra.
 
 from __future__ import annotations
 
+import inspect
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,6 +83,9 @@ KEYS_ADDED_LATER: dict[str, Any] = {
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
+# Tissue keys that apply to every tissue; each other key is read only by the tissue builders
+# (vasc_pipeline.tissue.TISSUES) whose signature names it.
+TISSUE_KEYS_OF_EVERY_TISSUE = ("name", "q_required", "inlet_share", "inlet_assignment", "bifurcation_reach")
 
 
 class ConfigError(ValueError):
@@ -333,13 +338,7 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "tissue.bifurcation_reach confines the anneal's bifurcations; the CCO growth (method=cco) "
                 "places them at their optimum: leave it unset (null) there"
             )
-    for key, what in (
-        ("ostium_height", "places the heart's ostia"),
-        ("base_cut", "shapes the heart"),
-        ("elongation", "shapes the heart"),
-    ):
-        if getattr(cfg.tissue, key) is not None and cfg.tissue.name != "heart":
-            raise ConfigError(f"tissue.{key} {what}; tissue={cfg.tissue.name} is not the heart: leave it unset (null)")
+    _check_tissue_keys(cfg.tissue)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
@@ -443,6 +442,25 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return cfg
+
+
+def _check_tissue_keys(tissue: TissueConfig) -> None:
+    """A tissue key the chosen tissue does not read (``tissue.mass_g`` with ``tissue=sphere``)
+    must keep its default: set, it would change nothing but the run's identity."""
+    from .tissue import TISSUES
+
+    read_by = {name: set(inspect.signature(build).parameters) for name, build in TISSUES.items()}
+    defaults = TissueConfig()
+    for key in TissueConfig.__dataclass_fields__:
+        if key in TISSUE_KEYS_OF_EVERY_TISSUE or key in read_by[tissue.name]:
+            continue
+        default = getattr(defaults, key)
+        if getattr(tissue, key) != default:
+            readers = " and ".join(f"tissue={name}" for name, keys in read_by.items() if key in keys)
+            raise ConfigError(
+                f"tissue.{key} is read by {readers} only; tissue={tissue.name} ignores it: leave it at its "
+                f"default ({json.dumps(default)})"
+            )
 
 
 def _validate_method(cfg: RunConfig) -> None:

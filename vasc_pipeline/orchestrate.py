@@ -322,6 +322,11 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
     from .reduce import ReductionError, reduce
 
     stream = stream or sys.stderr
+    try:  # the same checks as a run: a typo'd value is reported, not silently ignored
+        _config.validate(_config.to_run_config(cfg))
+    except ConfigError as exc:
+        stream.write(f"vasc_pipeline: error: {exc}\nNothing was reduced; existing results were left as they were.\n")
+        return 2
     output_dir = Path(cfg.output_dir)
     if not (output_dir / RUNS_DIR).is_dir():
         stream.write(
