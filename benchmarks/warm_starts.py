@@ -13,7 +13,11 @@ Each strategy spends the same number of proposals, ``--budget`` times the defaul
   ``--packing-per-terminal`` proposals each), the CCO tree grown on the packed sites
   (:func:`vasc_pipeline.cco.grow_tree`), then the tree annealed with the remaining moves,
   the supply term at its true weight throughout (``anneal.supply_T_start=null``), so the
-  terminals keep their packing while the tree is searched.
+  terminals keep their packing while the tree is searched;
+- ``late_exclusion``: ``anneal=fast`` with the exclusion term off (no traversals, the
+  dearest part of a hot move) for the first ``--exclusion-off-share`` of the moves, then
+  every segment's exclusion computed and the run continued on the true cost; one schedule,
+  calibrated on the true cost. Each part is a Metropolis chain of its own cost.
 
 One JSON line per (strategy, N, seed): C_s, the vascular cost C_v + C_w + (A_o/A_wv) C_o [W],
 the wall seconds of each stage and the fine stage's calibrated T_start [W]. Results
@@ -23,6 +27,8 @@ measured with it: benchmarks/README.md, "What was tried for fewer moves", and
     python benchmarks/warm_starts.py --sizes 1000 --budget 0.5 --seeds 0 1
     python benchmarks/warm_starts.py --sizes 2000 --budget 0.25 --strategies packed_cco \\
         --packing-per-terminal 30000 --fine anneal.accept_start=0.5
+    python benchmarks/warm_starts.py --sizes 1000 --budget 1 --seeds 0 1 2 3 \\
+        --strategies plain late_exclusion --exclusion-off-share 0.2
     python benchmarks/warm_starts.py --quick                 # seconds: wiring only
 """
 
@@ -35,7 +41,7 @@ import time
 
 import numpy as np
 
-STRATEGIES = ("plain", "split", "packed_cco")
+STRATEGIES = ("plain", "split", "packed_cco", "late_exclusion")
 
 
 def problem_of(n: int, steps: int, overrides: list[str]):
@@ -181,7 +187,32 @@ def run_packed_cco(n, seed, total, args):
     }
 
 
-RUNNERS = {"plain": run_plain, "split": run_split, "packed_cco": run_packed_cco}
+def run_late_exclusion(n, seed, total, args):
+    from vasc_pipeline import engine, kernel
+
+    start = time.perf_counter()
+    problem = problem_of(n, total, [])
+    state = engine.initial_state(problem, seed)  # the schedule calibrated on the true cost
+    switch = int(round(args.exclusion_off_share * total))
+    blind = dataclasses.replace(problem, model=problem.model._replace(exclusion_on=False), total_steps=switch)
+    kernel.initialise(blind.model, state)  # running sums without the exclusion term
+    for _ in engine.anneal_blocks(blind, state, engine.Trace(), 10_000_000):
+        pass
+    middle = time.perf_counter()
+    kernel.initialise(problem.model, state)  # every segment's traversal, then the true cost to the end
+    at_switch = costs(problem, state)
+    anneal_and_finish(problem, state)
+    end = time.perf_counter()
+    return {
+        "wall_seconds": end - start,
+        "wall_seconds_exclusion_off": middle - start,
+        "T_start": float(state.schedule[0]),
+        "at_switch": at_switch,
+        **costs(problem, state),
+    }
+
+
+RUNNERS = {"plain": run_plain, "split": run_split, "packed_cco": run_packed_cco, "late_exclusion": run_late_exclusion}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -193,6 +224,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--coarse-share", type=float, default=0.5, help="split: share of the moves for N/2")
     parser.add_argument("--offset", type=float, default=0.63, help="split: terminals' offset, in R_supply(N)")
     parser.add_argument("--packing-per-terminal", type=float, default=30000.0, help="packed_cco: packing moves")
+    parser.add_argument(
+        "--exclusion-off-share", type=float, default=0.2, help="late_exclusion: share of the moves without exclusion"
+    )
     parser.add_argument("--fine", nargs="*", default=[], help="config overrides of the last stage (split, packed_cco)")
     parser.add_argument("--quick", action="store_true", help="N = 40, 2e4 moves: checks the script runs")
     args = parser.parse_args(argv)
@@ -209,7 +243,9 @@ def main(argv: list[str] | None = None) -> None:
                     row.update(coarse_share=args.coarse_share, offset=args.offset)
                 if strategy == "packed_cco":
                     row["packing_per_terminal"] = args.packing_per_terminal
-                if strategy != "plain":
+                if strategy == "late_exclusion":
+                    row["exclusion_off_share"] = args.exclusion_off_share
+                if strategy in ("split", "packed_cco"):
                     row["fine"] = args.fine
                 print(json.dumps({**row, **RUNNERS[strategy](n, seed, total, args)}), flush=True)
 
