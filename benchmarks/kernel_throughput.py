@@ -20,6 +20,7 @@ other processes on the machine take their time slices without inflating the figu
 still share caches and memory bandwidth, so measure on a quiet machine when you can.
 
 Usage: python benchmarks/kernel_throughput.py [--sizes 500 1000] [--anneal fast|fast_v1|paper] [--run-budget 0.1]
+           [--override anneal.coarse_exclusion_factor=2 --override anneal.coarse_exclusion_phase=0.5]
        python benchmarks/kernel_throughput.py --quick    # N = 20, a few thousand moves (seconds)
 """
 
@@ -72,14 +73,27 @@ def phase_rates(problem, moves: int, warmup: int) -> dict[str, float]:
     return rates
 
 
+def coarse_exclusion_ratio(problem) -> float | None:
+    """With ``anneal.coarse_exclusion_*`` set: the exclusion cost of the seed-0 initial tree on
+    the coarse map over its true one (how well the coarse map stands in for it); else None."""
+    if problem.coarse_model is None:
+        return None
+    state = engine.initial_state(problem, seed=0)  # its running sums on the coarse map
+    coarse = state.costs[kernel.EXCLUSION] + state.compensation[kernel.EXCLUSION]
+    kernel.recompute_exclusion(problem.model, state)
+    return float(coarse / (state.costs[kernel.EXCLUSION] + state.compensation[kernel.EXCLUSION]))
+
+
 def harmonic_mean(rates) -> float:
     """The rate over equal step counts at each of ``rates``: their times add up."""
     rates = list(rates)
     return len(rates) / sum(1.0 / r for r in rates)
 
 
-def measure(n_terminals: int, moves: int, warmup: int, anneal: str = "paper", run_budget: float = 0.1) -> dict:
-    base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}"]
+def measure(
+    n_terminals: int, moves: int, warmup: int, anneal: str = "paper", run_budget: float = 0.1, overrides=()
+) -> dict:
+    base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}", *overrides]
     run_problem, run_steps, problem = trajectory_problem(base, run_budget)
     total = problem.total_steps  # the schedule's budget: paper 1e9 (N/1000)^2, fast 1e8 (N/1000)^2
     thirds = trajectory_rates(run_problem, run_steps)
@@ -87,6 +101,7 @@ def measure(n_terminals: int, moves: int, warmup: int, anneal: str = "paper", ru
     rate = harmonic_mean(thirds)
     return {
         "anneal": anneal,
+        "overrides": list(overrides),
         "n_terminals": n_terminals,
         "moves_per_second": round(rate),
         "run_budget": run_budget,
@@ -97,6 +112,7 @@ def measure(n_terminals: int, moves: int, warmup: int, anneal: str = "paper", ru
         "schedule_steps": total,
         "schedule_hours_extrapolated": round(total / rate / 3600, 2),
         "grid_voxels": int(problem.tissue.mask.size),
+        "coarse_exclusion_ratio": coarse_exclusion_ratio(problem),
     }
 
 
@@ -109,12 +125,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--run-budget", type=float, default=0.1, help="the trajectory's budget, times the schedule's default (0.1)"
     )
+    parser.add_argument("--override", action="append", default=[], help="extra config override, e.g. anneal.p_swap=0.5")
     parser.add_argument("--quick", action="store_true", help="N = 20, 2000 moves per phase: checks the script runs")
     args = parser.parse_args(argv)
     if args.quick:
         args.sizes, args.moves, args.warmup, args.run_budget = [20], 2000, 2000, 1e-3
     for n in args.sizes:
-        print(json.dumps(measure(n, args.moves, args.warmup, args.anneal, args.run_budget)), flush=True)
+        print(json.dumps(measure(n, args.moves, args.warmup, args.anneal, args.run_budget, args.override)), flush=True)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,13 @@ Each strategy spends the same number of proposals, ``--budget`` times the defaul
   dearest part of a hot move) for the first ``--exclusion-off-share`` of the moves, then
   every segment's exclusion computed and the run continued on the true cost; one schedule,
   calibrated on the true cost. Each part is a Metropolis chain of its own cost.
+- ``coarse_grid``: ``anneal=fast`` with the first ``--coarse-grid-share`` of the moves on
+  the tissue voxelised ``--coarse-factor`` f times coarser (shorter traversals, fewer
+  supply rows), with the exclusion weight times f^7 and the supply weight times f^3 so that
+  the coarse costs approximate the true ones; then terminals are moved into the true
+  tissue where the coarse one let them out, everything is rebuilt on the true grid and the
+  run continues on the true cost. One schedule, calibrated on the true cost.
+  (The exclusion term alone on a coarse map is a run option, ``anneal.coarse_exclusion_*``.)
 
 One JSON line per (strategy, N, seed): C_s, the vascular cost C_v + C_w + (A_o/A_wv) C_o [W],
 the wall seconds of each stage and the fine stage's calibrated T_start [W]. Results
@@ -41,7 +48,7 @@ import time
 
 import numpy as np
 
-STRATEGIES = ("plain", "split", "packed_cco", "late_exclusion")
+STRATEGIES = ("plain", "split", "packed_cco", "late_exclusion", "coarse_grid")
 
 
 def problem_of(n: int, steps: int, overrides: list[str]):
@@ -212,7 +219,74 @@ def run_late_exclusion(n, seed, total, args):
     }
 
 
-RUNNERS = {"plain": run_plain, "split": run_split, "packed_cco": run_packed_cco, "late_exclusion": run_late_exclusion}
+def moved_state(source, state, target):
+    """``state`` (of problem ``source``) carried to problem ``target`` (the same tree on
+    another voxel grid): terminals moved into ``target``'s tissue where they lie outside it,
+    bifurcations clipped into its box; step counter, generator, step sizes and schedule
+    kept; supply map, neighbour cells, caches and running sums rebuilt."""
+    from vasc_pipeline import engine, kernel
+
+    arrays = engine.state_arrays(state)
+    k, n = target.model.n_inlets, target.model.n_terminals
+    position = arrays["position"]
+    position[k : k + n] = target.tissue.move_into(target.tissue.mask, position[k : k + n])
+    lo, hi = target.tissue.bounds
+    position[k + n :] = np.clip(position[k + n :], lo, hi)
+    m = position.shape[0]
+    arrays.update(
+        supply=np.zeros(target.tissue.shape),
+        cell_of=np.zeros(m),
+        cell_head=np.zeros(int(np.prod(target.model.cell_shape))),
+        cell_next=np.zeros(m),
+        cell_prev=np.zeros(m),
+    )
+    moved = engine.restore_state(target, arrays)
+    kernel.initialise(target.model, moved)
+    return moved
+
+
+def run_coarse_grid(n, seed, total, args):
+    from vasc_pipeline import engine
+
+    start = time.perf_counter()
+    problem = problem_of(n, total, [])
+    state = engine.initial_state(problem, seed)  # the schedule calibrated on the true cost
+    f = args.coarse_factor
+    coarse = problem_of(n, total, [f"tissue.voxel_size={f * problem.tissue.voxel_size!r}"])
+    m = problem.model
+    coarse_model = coarse.model._replace(
+        tables=m.tables,
+        supply_rho=problem.physics.supply_radius / coarse.tissue.voxel_size,
+        w_exclusion=m.w_exclusion * f**7,  # sum of (D L)^6 over 1/f as many voxels, each f^-6 of the fine one
+        w_supply=m.w_supply * f**3,
+        step_max=m.step_max,
+    )
+    switch = int(round(args.coarse_grid_share * total))
+    coarse = dataclasses.replace(coarse, model=coarse_model, total_steps=switch)
+    state = moved_state(problem, state, coarse)
+    for _ in engine.anneal_blocks(coarse, state, engine.Trace(), 10_000_000):
+        pass
+    middle = time.perf_counter()
+    state = moved_state(coarse, state, problem)
+    at_switch = costs(problem, state)
+    anneal_and_finish(problem, state)
+    end = time.perf_counter()
+    return {
+        "wall_seconds": end - start,
+        "wall_seconds_coarse_grid": middle - start,
+        "T_start": float(state.schedule[0]),
+        "at_switch": at_switch,
+        **costs(problem, state),
+    }
+
+
+RUNNERS = {
+    "plain": run_plain,
+    "split": run_split,
+    "packed_cco": run_packed_cco,
+    "late_exclusion": run_late_exclusion,
+    "coarse_grid": run_coarse_grid,
+}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -226,6 +300,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--packing-per-terminal", type=float, default=30000.0, help="packed_cco: packing moves")
     parser.add_argument(
         "--exclusion-off-share", type=float, default=0.2, help="late_exclusion: share of the moves without exclusion"
+    )
+    parser.add_argument("--coarse-factor", type=float, default=2.0, help="coarse_grid: voxel edge factor")
+    parser.add_argument(
+        "--coarse-grid-share", type=float, default=0.3, help="coarse_grid: share of the moves on the coarse grid"
     )
     parser.add_argument("--fine", nargs="*", default=[], help="config overrides of the last stage (split, packed_cco)")
     parser.add_argument("--quick", action="store_true", help="N = 40, 2e4 moves: checks the script runs")
@@ -245,6 +323,8 @@ def main(argv: list[str] | None = None) -> None:
                     row["packing_per_terminal"] = args.packing_per_terminal
                 if strategy == "late_exclusion":
                     row["exclusion_off_share"] = args.exclusion_off_share
+                if strategy == "coarse_grid":
+                    row.update(coarse_factor=args.coarse_factor, coarse_grid_share=args.coarse_grid_share)
                 if strategy in ("split", "packed_cco"):
                     row["fine"] = args.fine
                 print(json.dumps({**row, **RUNNERS[strategy](n, seed, total, args)}), flush=True)

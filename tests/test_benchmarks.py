@@ -35,7 +35,7 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
             quantiles = list(r["exclusion_cost_over_temperature"].values())
             assert len(quantiles) == 4 and 0 <= quantiles[0] and quantiles == sorted(quantiles)
     if script.stem == "kernel_throughput":
-        assert all(r["moves_per_second"] > 0 for r in records)
+        assert all(r["moves_per_second"] > 0 and r["coarse_exclusion_ratio"] is None for r in records)
     if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
         absolute = [r for r in records if r.get("fit") == "supply_per_terminal"]
         assert absolute and all(r["alpha"] == pytest.approx(1.5, abs=0.05) for r in absolute)
@@ -57,3 +57,18 @@ def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
     (job,) = time_to_quality.jobs_for(tmp_path, "fast", 0.3, 40, [0], 2000, ["anneal.p_swap=0.7"], label)
     assert Path(job.store).parent.parent == tmp_path / label / "x0.3"
     assert job.config["anneal"]["p_swap"] == 0.7  # not the default (0.3)
+
+
+def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):
+    coarse = ["--override", "anneal.coarse_exclusion_factor=2", "--override", "anneal.coarse_exclusion_phase=0.5"]
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS[0].parent / "kernel_throughput.py"), "--quick", "--anneal", "fast", *coarse],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    (record,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert record["overrides"] == coarse[1::2]
+    assert 0.3 < record["coarse_exclusion_ratio"] < 3.0

@@ -123,13 +123,13 @@ def test_leap_map_marks_exactly_the_blocks_without_domain_voxels():
 def test_depth_fields_give_back_the_map_bit_for_bit():
     rs = np.random.default_rng(5)
     depth = kernel.leap_map(np.where(rs.random((20, 30, 40)) < 0.3, np.sqrt(rs.integers(1, 400, (20, 30, 40))), 0.0))
-    fields = kernel.depth_fields(depth)
+    fields = kernel.depth_fields(depth, np.zeros(3), 1.0)
     assert fields["depth_index"].dtype == np.uint16 and fields["depth_index"].shape == depth.shape
     assert fields["depth_values"].dtype == np.float32
     assert np.array_equal(fields["depth_values"][fields["depth_index"]].view(np.uint32), depth.view(np.uint32))
     # More distinct values than a uint16 can index: the index widens, the values stay exact.
     wide = rs.permutation(np.arange(70_000, dtype=np.float32)).reshape(7, 100, 100) / 7
-    fields = kernel.depth_fields(wide)
+    fields = kernel.depth_fields(wide, np.zeros(3), 1.0)
     assert fields["depth_index"].dtype == np.uint32
     assert np.array_equal(fields["depth_values"][fields["depth_index"]], wide)
 
@@ -156,9 +156,9 @@ def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_pr
     """Leaps over empty blocks must land where the voxel-by-voxel walk would, crossings and ties
     included: the sums over the leap map and over the plain map must be the same float. Voxel
     size 1 and origin 0 make plane coordinates exact, so ties between axes really occur."""
-    plain = sphere_problem.model._replace(**kernel.depth_fields(distance), origin=np.zeros(3), voxel_size=1.0)
+    plain = sphere_problem.model._replace(**kernel.depth_fields(distance, np.zeros(3), 1.0))
     assert (kernel.leap_map(distance) < 0).mean() > 0.5
-    leap = plain._replace(**kernel.depth_fields(kernel.leap_map(distance)))
+    leap = plain._replace(**kernel.depth_fields(kernel.leap_map(distance), np.zeros(3), 1.0))
     rs = np.random.default_rng(4)
     b = kernel.LEAP_BLOCK
     size = np.array(distance.shape[::-1], dtype=float)
@@ -195,9 +195,9 @@ def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_pr
     corner_map = np.zeros((1, 48, 48), dtype=np.float32)
     corner_map[0, 31, 47] = 2.0
     p0, p1 = np.array([86.5, 70.5, 0.0]), np.array([10.5, -5.5, 0.0])
-    assert kernel.segment_exclusion(leap._replace(**kernel.depth_fields(kernel.leap_map(corner_map))), p0, p1) == (
-        kernel.segment_exclusion(plain._replace(**kernel.depth_fields(corner_map)), p0, p1)
-    )
+    corner_leap = leap._replace(**kernel.depth_fields(kernel.leap_map(corner_map), np.zeros(3), 1.0))
+    corner_plain = plain._replace(**kernel.depth_fields(corner_map, np.zeros(3), 1.0))
+    assert kernel.segment_exclusion(corner_leap, p0, p1) == kernel.segment_exclusion(corner_plain, p0, p1)
     # A non-finite endpoint costs nothing, as in the walk (and does not leap forever).
     assert kernel.segment_exclusion(leap, np.array([np.nan, 5.0, 0.0]), np.array([10.0, 5.0, 0.0])) == 0.0
     assert kernel.segment_exclusion(leap, np.array([-np.inf, 5.0, 0.0]), np.array([10.0, 5.0, 0.0])) == 0.0

@@ -52,6 +52,7 @@ PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps 
 MAX_STEPS = 10**15
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
+MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: the map no longer resolves the tissue
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
@@ -79,6 +80,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.full_width_phase": 1.0,
     "anneal.cold_from": None,
     "anneal.cold_share": None,
+    "anneal.coarse_exclusion_factor": None,
+    "anneal.coarse_exclusion_phase": None,
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
@@ -173,6 +176,10 @@ class AnnealConfig:
     cold_from: Optional[float] = None  # where the schedule's cold part starts, as a share of the way from
     # T_start to T_end in log T; None: one exponential from T_start to T_end
     cold_share: Optional[float] = None  # with cold_from: the share of the tree anneal's steps spent in it
+    coarse_exclusion_factor: Optional[int] = None  # the exclusion term on a depth map this many times
+    # coarser (kernel.coarse_depth_fields) over the first coarse_exclusion_phase of the tree anneal's steps,
+    # then on the true one; None: the true map throughout
+    coarse_exclusion_phase: Optional[float] = None
     acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
     polish: bool = False  # optimise the final topology's bifurcation positions (finish.polish)
@@ -377,6 +384,20 @@ def validate(cfg: RunConfig) -> RunConfig:
         for name in ("cold_from", "cold_share"):
             if not 0.0 < getattr(a, name) < 1.0:
                 raise ConfigError(f"anneal.{name} must lie in (0, 1), got {getattr(a, name)}")
+    if (a.coarse_exclusion_factor is None) != (a.coarse_exclusion_phase is None):
+        raise ConfigError(
+            "anneal.coarse_exclusion_factor and anneal.coarse_exclusion_phase are set together (both null: the "
+            f"true depth map throughout), got factor={a.coarse_exclusion_factor}, phase={a.coarse_exclusion_phase}"
+        )
+    if a.coarse_exclusion_factor is not None:
+        f = a.coarse_exclusion_factor
+        if isinstance(f, bool) or not isinstance(f, int) or not 2 <= f <= MAX_COARSE_EXCLUSION_FACTOR:
+            raise ConfigError(
+                f"anneal.coarse_exclusion_factor must be an integer in [2, {MAX_COARSE_EXCLUSION_FACTOR}] "
+                f"(voxels per coarse voxel edge), got {f!r}"
+            )
+        if not 0.0 < a.coarse_exclusion_phase < 1.0:
+            raise ConfigError(f"anneal.coarse_exclusion_phase must lie in (0, 1), got {a.coarse_exclusion_phase}")
     _positive("anneal.neighbour_cell", a.neighbour_cell)
     if not isinstance(a.polish_swaps_max_terminals, int) or a.polish_swaps_max_terminals < 0:
         raise ConfigError(

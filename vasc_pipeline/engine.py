@@ -68,6 +68,8 @@ class Problem:
     model: kernel.Model
     total_steps: int
     sites: np.ndarray | None = None
+    coarse_model: kernel.Model | None = None  # ``model`` on the coarse exclusion map (anneal.coarse_exclusion_*) ...
+    coarse_steps: int = 0  # ... for the proposals before this one (0: none)
 
 
 @dataclass
@@ -179,7 +181,9 @@ def build_problem(config: Any) -> Problem:
         n_terminals=n,
         tables=cost_tables(physics).array,
         mask=tissue.mask,
-        **kernel.depth_fields(kernel.leap_map(tissue.distance) if terms.exclusion else tissue.distance),
+        **kernel.depth_fields(
+            kernel.leap_map(tissue.distance) if terms.exclusion else tissue.distance, tissue.origin, tissue.voxel_size
+        ),
         origin=tissue.origin,
         voxel_size=float(tissue.voxel_size),
         box_lo=lo,
@@ -222,7 +226,13 @@ def build_problem(config: Any) -> Problem:
             else tissue.bifurcation_region(cfg.tissue.bifurcation_reach)
         ),
     )
-    return Problem(cfg, physics, tissue, terms, model, total_steps, sites)
+    coarse_model, coarse_steps = None, 0
+    if a.coarse_exclusion_factor is not None and terms.exclusion:
+        coarse_model = model._replace(
+            **kernel.coarse_depth_fields(tissue.distance, tissue.origin, tissue.voxel_size, a.coarse_exclusion_factor)
+        )
+        coarse_steps = pack_steps + int(tree_steps(a.coarse_exclusion_phase))
+    return Problem(cfg, physics, tissue, terms, model, total_steps, sites, coarse_model, coarse_steps)
 
 
 def supply_dtype(n_terminals: int) -> type:
@@ -289,6 +299,8 @@ def state_from_tree(problem: Problem, tree: Tree, rng: np.ndarray) -> kernel.Sta
     state.schedule[:] = (
         calibrate_schedule(problem, state) if None in (anneal.T_start, anneal.T_end) else (anneal.T_start, anneal.T_end)
     )
+    if problem.coarse_steps > 0:  # calibrated on the true cost, run on the coarse exclusion map first
+        kernel.recompute_exclusion(problem.coarse_model, state)
     return state
 
 
@@ -332,12 +344,25 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
 
 def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
     """Propose ``n_steps`` moves (in place): packing moves first while the packing phase
-    lasts (:mod:`vasc_pipeline.packing`), then the tree anneal's. The GIL is released."""
+    lasts (:mod:`vasc_pipeline.packing`), then the tree anneal's; before
+    ``problem.coarse_steps`` on the coarse exclusion map, and the block that reaches it
+    recomputes every segment's exclusion on the true one. The GIL is released."""
     n = int(n_steps)
-    if state.counters[kernel.COUNTER_STEP] < problem.model.pack_steps:
-        n -= packing.pack_block(problem.model, state, n)
+    coarse = min(n, problem.coarse_steps - int(state.counters[kernel.COUNTER_STEP]))
+    if coarse > 0:
+        _run_model(problem.coarse_model, state, coarse)
+        n -= coarse
+        if state.counters[kernel.COUNTER_STEP] == problem.coarse_steps:
+            kernel.recompute_exclusion(problem.model, state)
     if n > 0:
-        kernel.anneal_block(problem.model, state, n)
+        _run_model(problem.model, state, n)
+
+
+def _run_model(model: kernel.Model, state: kernel.State, n: int) -> None:
+    if state.counters[kernel.COUNTER_STEP] < model.pack_steps:
+        n -= packing.pack_block(model, state, n)
+    if n > 0:
+        kernel.anneal_block(model, state, n)
 
 
 def running_costs(problem: Problem, state: kernel.State) -> dict[str, float]:

@@ -39,6 +39,9 @@ Model = namedtuple(
         # indices into depth_values (kernel.depth_fields)
         "depth_values",  # float32: exclusion depth in voxel units inside; 0 outside, or -1 where the
         # traversal may leap the voxel's whole block (kernel.leap_map; never a signed distance)
+        "depth_origin",
+        "depth_voxel_size",  # the depth map's grid: float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, and
+        # edge, m (the tissue's, or a coarser one for a cheaper exclusion term early in a run)
         "origin",  # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
         "voxel_size",  # float, m
         "box_lo",
@@ -248,9 +251,10 @@ def leap_map(distance):
     return leap
 
 
-def depth_fields(depth_map):
-    """``Model``'s ``depth_index`` and ``depth_values`` for a depth map (plain or
-    :func:`leap_map`): the map's distinct float32 values and, per voxel, the index of its
+def depth_fields(depth_map, origin, voxel_size):
+    """``Model``'s ``depth_index``, ``depth_values``, ``depth_origin`` and ``depth_voxel_size`` for
+    a depth map (plain or :func:`leap_map`) on the grid of ``origin`` (voxel [0, 0, 0]'s centre,
+    [x, y, z], m) and ``voxel_size`` (m): the map's distinct float32 values and, per voxel, the index of its
     value, so that ``depth_values[depth_index]`` is the map bit for bit. A distance transform
     takes few distinct values (square roots of integers: 4 361 at N = 6000), so the index
     grid is uint16, half the float32 map's bytes: the traversal's loads then miss the cache
@@ -260,7 +264,31 @@ def depth_fields(depth_map):
     return {
         "depth_index": np.ascontiguousarray(index.reshape(np.shape(depth_map)), dtype=dtype),
         "depth_values": values,
+        "depth_origin": np.asarray(origin, dtype=np.float64),
+        "depth_voxel_size": float(voxel_size),
     }
+
+
+def coarse_depth_fields(distance, origin, voxel_size, factor):
+    """:func:`depth_fields` of a depth map ``factor`` (an integer) times coarser than
+    ``distance`` (the tissue's, voxel [0, 0, 0] centred at ``origin``, edge ``voxel_size``;
+    z is not coarsened in a one-layer grid), for a cheaper exclusion term: a traversal then
+    crosses about 1/factor as many voxels.
+
+    Each coarse voxel holds the largest depth (in the true voxel units) of the voxels it
+    covers, so it is nowhere shallower than the tissue under it (a vessel cannot sink unseen
+    into the tissue below a coarse voxel's centre), times factor^(1/6): a coarse voxel stands
+    for about ``factor`` true ones along a segment, and (factor^(1/6) D L)^6 = factor (D L)^6
+    with L in coarse units, so the coarse sum approximates the true one in its own units and
+    no weight changes (measured in benchmarks/README.md, "A coarse exclusion map early in a run").
+    """
+    f = int(factor)
+    fz = 1 if distance.shape[0] == 1 else f
+    padded = np.pad(distance, [(0, -distance.shape[0] % fz), (0, -distance.shape[1] % f), (0, -distance.shape[2] % f)])
+    nz, ny, nx = padded.shape[0] // fz, padded.shape[1] // f, padded.shape[2] // f
+    coarse = padded.reshape(nz, fz, ny, f, nx, f).max(axis=(1, 3, 5)) * np.float32(f ** (1.0 / 6.0))
+    centre = 0.5 * (np.array([f, f, fz]) - 1) * voxel_size  # of a coarse voxel, from its first fine voxel's
+    return depth_fields(leap_map(coarse), np.asarray(origin, dtype=np.float64) + centre, f * voxel_size)
 
 
 @jit_norc_inline
@@ -280,8 +308,8 @@ def segment_exclusion_capped(model, p0, p1, cap):
     it (every voxel adds a term >= 0, each addition rounding monotonically): a move rejected
     on it is rejected on the full sum. At or below ``cap`` it is the full sum, bit for bit.
     """
-    o = model.origin
-    index, values, h = model.depth_index, model.depth_values, model.voxel_size
+    o = model.depth_origin
+    index, values, h = model.depth_index, model.depth_values, model.depth_voxel_size
     return _traverse(index, values, o[0], o[1], o[2], h, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2], cap)
 
 
@@ -765,7 +793,6 @@ def initialise(model, state):
     state.costs[:] = 0.0
     state.compensation[:] = 0.0
     state.seg_length[:] = 0.0
-    state.seg_exclusion[:] = 0.0
     supply = state.supply
     nz, ny, nx = supply.shape
     for k in range(nz):
@@ -779,10 +806,7 @@ def initialise(model, state):
         state.seg_length[i] = length
         _add(state.costs, state.compensation, VOLUME, tables[TABLE_VOLUME, n] * length)
         _add(state.costs, state.compensation, POWER, tables[TABLE_POWER, n] * length)
-        if model.exclusion_on:
-            s = segment_exclusion(model, pos[i], pos[p])
-            state.seg_exclusion[i] = s
-            _add(state.costs, state.compensation, EXCLUSION, tables[TABLE_EXCLUSION, n] * s)
+    recompute_exclusion(model, state)
     if model.supply_on:
         c_s = 10.0 * np.count_nonzero(model.mask)
         for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
@@ -791,6 +815,23 @@ def initialise(model, state):
     if model.pressure_on:
         state.costs[PRESSURE] = pressure_cost(model, state)
     build_cells(model, state)
+
+
+@jit
+def recompute_exclusion(model, state):
+    """Every segment's exclusion sum and the running exclusion cost from scratch, on the
+    model's depth map (0 with the term off): also how a run changes depth maps
+    (:func:`coarse_depth_fields`)."""
+    state.costs[EXCLUSION] = 0.0
+    state.compensation[EXCLUSION] = 0.0
+    state.seg_exclusion[:] = 0.0
+    if not model.exclusion_on:
+        return
+    pos = state.position
+    for i in range(model.n_inlets, state.parent.size):
+        s = segment_exclusion(model, pos[i], pos[state.parent[i]])
+        state.seg_exclusion[i] = s
+        _add(state.costs, state.compensation, EXCLUSION, model.tables[TABLE_EXCLUSION, state.n_downstream[i]] * s)
 
 
 @jit_norc
