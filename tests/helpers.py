@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from vasc_pipeline import config, costs, engine, kernel
+from vasc_pipeline import config, costs, engine, kernel, sweep
 from vasc_pipeline.tree import check_tree
 
 
@@ -115,3 +118,35 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def kill_job_after_first_checkpoint(overrides: list[str]) -> int:
+    """Run the one job of ``overrides`` in a child process, SIGKILL it as soon as its store
+    records a checkpoint, and return that checkpoint's step (0 if none came within 240 s)."""
+    (j,) = sweep.expand(config.compose(overrides))
+    script = (
+        "import sys, json; from vasc_pipeline import job, sweep, config; "
+        "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, json.dumps(overrides)],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    store_attrs = Path(j.store) / "zarr.json"
+    killed_at = 0
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                killed_at = json.loads(store_attrs.read_text())["attributes"].get("steps_done", 0)
+            except (OSError, ValueError, KeyError):
+                killed_at = 0
+            if killed_at > 0:
+                break
+            time.sleep(0.005)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    return killed_at

@@ -4,22 +4,13 @@ across block splits, checkpoints and a SIGKILL, and bad input."""
 
 from __future__ import annotations
 
-import json
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
-
 import numpy as np
 import pytest
-from helpers import make_problem
+from helpers import kill_job_after_first_checkpoint, make_problem
 
 from vasc_pipeline import config, engine, job, kernel, sweep
 from vasc_pipeline.config import ConfigError
 
-REPO = Path(__file__).resolve().parents[1]
 COARSE = ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_phase=0.4")
 
 
@@ -132,31 +123,7 @@ def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):
     ]
     (j,) = sweep.expand(config.compose(overrides))
     coarse_end = 600_000
-    script = (
-        "import sys, json; from vasc_pipeline import job, sweep, config; "
-        "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)"
-    )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", script, json.dumps(overrides)],
-        cwd=REPO,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    store_attrs = Path(j.store) / "zarr.json"
-    killed_at = 0
-    try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and proc.poll() is None:
-            try:
-                killed_at = json.loads(store_attrs.read_text())["attributes"].get("steps_done", 0)
-            except (OSError, ValueError, KeyError):
-                killed_at = 0
-            if killed_at > 0:
-                break
-            time.sleep(0.005)
-    finally:
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait()
+    killed_at = kill_job_after_first_checkpoint(overrides)
     assert 0 < killed_at < coarse_end, "no checkpoint inside the coarse part before the kill"
     summary = job.run_job(j)
     assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < coarse_end

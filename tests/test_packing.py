@@ -3,23 +3,14 @@ phase, determinism across block splits, checkpoints and a SIGKILL, and bad input
 
 from __future__ import annotations
 
-import json
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
-
 import numpy as np
 import pytest
-from helpers import make_problem
+from helpers import kill_job_after_first_checkpoint, make_problem
 
 from vasc_pipeline import config, costs, engine, job, kernel, packing, sweep
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tree import check_tree
 
-REPO = Path(__file__).resolve().parents[1]
 PACKED = (
     "tissue=sphere",
     "n_terminals=40",
@@ -114,31 +105,7 @@ def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
     ]
     (j,) = sweep.expand(config.compose(overrides))
     pack = 3000 * 300
-    script = (
-        "import sys, json; from vasc_pipeline import job, sweep, config; "
-        "(j,) = sweep.expand(config.compose(json.loads(sys.argv[1]))); job.run_job(j)"
-    )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", script, json.dumps(overrides)],
-        cwd=REPO,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    store_attrs = Path(j.store) / "zarr.json"
-    killed_at = 0
-    try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and proc.poll() is None:
-            try:
-                killed_at = json.loads(store_attrs.read_text())["attributes"].get("steps_done", 0)
-            except (OSError, ValueError, KeyError):
-                killed_at = 0
-            if 0 < killed_at:
-                break
-            time.sleep(0.005)
-    finally:
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait()
+    killed_at = kill_job_after_first_checkpoint(overrides)
     assert 0 < killed_at < pack, "no checkpoint inside the packing phase before the kill"
     summary = job.run_job(j)
     assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < pack
