@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The coarse exclusion map early in a run (anneal.coarse_exclusion_*; benchmarks/README.md,
+# "A coarse exclusion map early in a run") against today's default, resumable: every run is
+# a checkpointed pipeline job, so rerunning this script after an interruption continues where
+# it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
+#
+#     bash benchmarks/coarse_exclusion_study.sh [OUT]      # default OUT: results/coarse_exclusion
+#
+# 1. equal moves at N = 1000 and 2000, seeds 0-3 (the default's rows at the full budget are in
+#    benchmarks/results/time_to_quality_rows.jsonl);
+# 2. N = 6000 at 0.37 of the budget (about an hour of one quiet core for the default), seeds
+#    0 and 1, the default beside it for paired wall times.
+# Runs one job at a time (--workers 1), so that the wall times are one core's.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-results/coarse_exclusion}
+T=(python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast)
+COARSE=(--label "fast, coarse_exclusion 2 over 0.3" --override anneal.coarse_exclusion_factor=2
+        --override anneal.coarse_exclusion_phase=0.3)
+"${T[@]}" "${COARSE[@]}" --sizes 1000 2000 --seeds 0 1 2 3
+for seed in 0 1; do
+    "${T[@]}" "${COARSE[@]}" --sizes 6000 --seeds "$seed" --budgets 0.37
+    "${T[@]}" --label "fast (2026-11-27)" --sizes 6000 --seeds "$seed" --budgets 0.37
+done
