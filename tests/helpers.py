@@ -11,9 +11,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from vasc_pipeline import config, costs, engine, kernel, sweep
+from vasc_pipeline import config, costs, engine, job, kernel, sweep
 from vasc_pipeline.tree import check_tree
 
 
@@ -120,9 +121,10 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def kill_job_after_first_checkpoint(overrides: list[str]) -> int:
+def assert_killed_job_resumes_bit_identically(overrides: list[str], kill_before: int) -> None:
     """Run the one job of ``overrides`` in a child process, SIGKILL it as soon as its store
-    records a checkpoint, and return that checkpoint's step (0 if none came within 240 s)."""
+    records a checkpoint (which must come before step ``kill_before``), resume it in this
+    process, and check the final tree against the same run made in one go."""
     (j,) = sweep.expand(config.compose(overrides))
     script = (
         "import sys, json; from vasc_pipeline import job, sweep, config; "
@@ -149,4 +151,10 @@ def kill_job_after_first_checkpoint(overrides: list[str]) -> int:
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
-    return killed_at
+    assert 0 < killed_at < kill_before, f"no checkpoint before step {kill_before} ahead of the kill"
+    summary = job.run_job(j)
+    assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < kill_before
+    reference = engine.run(j.config, seed=0)
+    tree = job.read_final_tree(j.store)
+    np.testing.assert_array_equal(tree["parent"], reference.tree.parent)
+    np.testing.assert_array_equal(tree["position"], reference.tree.position)

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import kill_job_after_first_checkpoint, make_problem
+from helpers import assert_killed_job_resumes_bit_identically, make_problem
 
-from vasc_pipeline import config, engine, job, kernel, sweep
+from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
 
 COARSE = ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_phase=0.4")
@@ -121,16 +121,7 @@ def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):
         "checkpoint.every_seconds=0.01",
         f"output_dir={tmp_path}",
     ]
-    (j,) = sweep.expand(config.compose(overrides))
-    coarse_end = 600_000
-    killed_at = kill_job_after_first_checkpoint(overrides)
-    assert 0 < killed_at < coarse_end, "no checkpoint inside the coarse part before the kill"
-    summary = job.run_job(j)
-    assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < coarse_end
-    reference = engine.run(j.config, seed=0)
-    tree = job.read_final_tree(j.store)
-    np.testing.assert_array_equal(tree["parent"], reference.tree.parent)
-    np.testing.assert_array_equal(tree["position"], reference.tree.position)
+    assert_killed_job_resumes_bit_identically(overrides, kill_before=600_000)
 
 
 @pytest.mark.parametrize(

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import kill_job_after_first_checkpoint, make_problem
+from helpers import assert_killed_job_resumes_bit_identically, make_problem
 
-from vasc_pipeline import config, costs, engine, job, kernel, packing, sweep
+from vasc_pipeline import config, costs, engine, kernel, packing
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tree import check_tree
 
@@ -103,16 +103,7 @@ def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
         "checkpoint.every_seconds=0.01",
         f"output_dir={tmp_path}",
     ]
-    (j,) = sweep.expand(config.compose(overrides))
-    pack = 3000 * 300
-    killed_at = kill_job_after_first_checkpoint(overrides)
-    assert 0 < killed_at < pack, "no checkpoint inside the packing phase before the kill"
-    summary = job.run_job(j)
-    assert summary["resumed_from"] is not None and 0 < summary["resumed_from"] < pack
-    reference = engine.run(j.config, seed=0)
-    tree = job.read_final_tree(j.store)
-    np.testing.assert_array_equal(tree["parent"], reference.tree.parent)
-    np.testing.assert_array_equal(tree["position"], reference.tree.position)
+    assert_killed_job_resumes_bit_identically(overrides, kill_before=3000 * 300)
 
 
 @pytest.mark.parametrize(
