@@ -6,6 +6,8 @@
 #
 #     bash benchmarks/coarse_exclusion_study.sh [OUT]      # default OUT: results/coarse_exclusion
 #
+# with the environment that has vasc_pipeline installed active (the script calls `python`).
+#
 # 1. equal moves at N = 1000 and 2000, seeds 0-3 (the default's rows at the full budget are in
 #    benchmarks/results/time_to_quality_rows.jsonl);
 # 2. N = 6000 at 0.37 of the budget (about an hour of one quiet core for the default), seeds

@@ -64,12 +64,32 @@ def default_steps(n: int) -> int:
     return config.scheduled_steps(config.compose(["anneal=fast", f"n_terminals={n}"]))
 
 
-def anneal_and_finish(problem, state) -> None:
+def anneal_to_end(problem, state) -> None:
+    """The anneal from the state's step to ``problem.total_steps``, in blocks (no polish)."""
     from vasc_pipeline import engine
 
     for _ in engine.anneal_blocks(problem, state, engine.Trace(), 10_000_000):
         pass
+
+
+def anneal_and_finish(problem, state) -> None:
+    from vasc_pipeline import engine
+
+    anneal_to_end(problem, state)
     engine.finish(problem, state)
+
+
+def two_stage_row(start: float, middle: float, first_stage: str, problem, state, **handover) -> dict:
+    """A two-stage strategy's result, now: the wall seconds in all and of the first stage
+    (``wall_seconds_<first_stage>``), the calibrated T_start, the costs at the hand-over
+    (``handover``) and the final costs."""
+    return {
+        "wall_seconds": time.perf_counter() - start,
+        f"wall_seconds_{first_stage}": middle - start,
+        "T_start": float(state.schedule[0]),
+        **handover,
+        **costs(problem, state),
+    }
 
 
 def costs(problem, state) -> dict[str, float]:
@@ -153,15 +173,7 @@ def run_split(n, seed, total, args):
     state = engine.state_from_tree(problem, tree, seed_state(seed + 1))
     split_costs = costs(problem, state)
     anneal_and_finish(problem, state)
-    end = time.perf_counter()
-    return {
-        "wall_seconds": end - start,
-        "wall_seconds_coarse": middle - start,
-        "T_start": float(state.schedule[0]),
-        "coarse": coarse_costs,
-        "after_split": split_costs,
-        **costs(problem, state),
-    }
+    return two_stage_row(start, middle, "coarse", problem, state, coarse=coarse_costs, after_split=split_costs)
 
 
 def run_packed_cco(n, seed, total, args):
@@ -184,14 +196,7 @@ def run_packed_cco(n, seed, total, args):
     state = engine.state_from_tree(problem, grow_tree(problem, rng)[0], rng)
     cco_costs = costs(problem, state)
     anneal_and_finish(problem, state)
-    end = time.perf_counter()
-    return {
-        "wall_seconds": end - start,
-        "wall_seconds_packing": middle - start,
-        "T_start": float(state.schedule[0]),
-        "cco": cco_costs,
-        **costs(problem, state),
-    }
+    return two_stage_row(start, middle, "packing", problem, state, cco=cco_costs)
 
 
 def run_late_exclusion(n, seed, total, args):
@@ -203,20 +208,12 @@ def run_late_exclusion(n, seed, total, args):
     switch = int(round(args.exclusion_off_share * total))
     blind = dataclasses.replace(problem, model=problem.model._replace(exclusion_on=False), total_steps=switch)
     kernel.initialise(blind.model, state)  # running sums without the exclusion term
-    for _ in engine.anneal_blocks(blind, state, engine.Trace(), 10_000_000):
-        pass
+    anneal_to_end(blind, state)
     middle = time.perf_counter()
     kernel.initialise(problem.model, state)  # every segment's traversal, then the true cost to the end
     at_switch = costs(problem, state)
     anneal_and_finish(problem, state)
-    end = time.perf_counter()
-    return {
-        "wall_seconds": end - start,
-        "wall_seconds_exclusion_off": middle - start,
-        "T_start": float(state.schedule[0]),
-        "at_switch": at_switch,
-        **costs(problem, state),
-    }
+    return two_stage_row(start, middle, "exclusion_off", problem, state, at_switch=at_switch)
 
 
 def moved_state(source, state, target):
@@ -264,20 +261,12 @@ def run_coarse_grid(n, seed, total, args):
     switch = int(round(args.coarse_grid_share * total))
     coarse = dataclasses.replace(coarse, model=coarse_model, total_steps=switch)
     state = moved_state(problem, state, coarse)
-    for _ in engine.anneal_blocks(coarse, state, engine.Trace(), 10_000_000):
-        pass
+    anneal_to_end(coarse, state)
     middle = time.perf_counter()
     state = moved_state(coarse, state, problem)
     at_switch = costs(problem, state)
     anneal_and_finish(problem, state)
-    end = time.perf_counter()
-    return {
-        "wall_seconds": end - start,
-        "wall_seconds_coarse_grid": middle - start,
-        "T_start": float(state.schedule[0]),
-        "at_switch": at_switch,
-        **costs(problem, state),
-    }
+    return two_stage_row(start, middle, "coarse_grid", problem, state, at_switch=at_switch)
 
 
 RUNNERS = {

@@ -59,6 +59,20 @@ def assert_running_equals_full(problem, state):
     return running
 
 
+def assert_block_splits_bit_identical(problem, seed: int, blocks) -> None:
+    """Run ``problem`` from the initial tree of ``seed`` in one block of ``sum(blocks)``
+    proposals and again block by block, the state round-tripped through its checkpoint
+    arrays after each block (as a resume would): every checkpoint field must be the same."""
+    one = engine.initial_state(problem, seed)
+    engine.run_block(problem, one, sum(blocks))
+    split = engine.initial_state(problem, seed)
+    for n in blocks:
+        engine.run_block(problem, split, n)
+        split = engine.restore_state(problem, engine.state_arrays(split))
+    for name in engine.CHECKPOINT_FIELDS:
+        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+
+
 def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True):
     c = state.counters
     pairs = [

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_killed_job_resumes_bit_identically, make_problem
+from helpers import assert_block_splits_bit_identical, assert_killed_job_resumes_bit_identically, make_problem
 
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
@@ -85,28 +85,15 @@ def test_running_sums_follow_the_coarse_map_then_the_true_one():
 
 def test_block_splits_and_checkpoint_round_trips_across_the_switch_are_bit_identical():
     problem = make_problem("tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", *COARSE)
-    one = engine.initial_state(problem, 5)
-    engine.run_block(problem, one, 60_000)
-    split = engine.initial_state(problem, 5)
-    for n in (1, 9_999, 14_000, 0, 7_000, 2, 28_998):  # the coarse part ends at 24_000, between blocks
-        engine.run_block(problem, split, n)
-        split = engine.restore_state(problem, engine.state_arrays(split))
-    for name in engine.CHECKPOINT_FIELDS:
-        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+    # The coarse part ends at 24_000, between blocks.
+    assert_block_splits_bit_identical(problem, 5, (1, 9_999, 14_000, 0, 7_000, 2, 28_998))
     # With packing first the coarse part follows it: the same across a split inside either part.
     packed = make_problem(
         "tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", *COARSE,
         "anneal.packing_steps_per_terminal=250",
     )  # fmt: skip
     assert packed.coarse_steps == 10_000 + 20_000
-    one = engine.initial_state(packed, 2)
-    engine.run_block(packed, one, 60_000)
-    split = engine.initial_state(packed, 2)
-    for n in (9_000, 2_000, 20_000, 29_000):
-        engine.run_block(packed, split, n)
-        split = engine.restore_state(packed, engine.state_arrays(split))
-    for name in engine.CHECKPOINT_FIELDS:
-        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+    assert_block_splits_bit_identical(packed, 2, (9_000, 2_000, 20_000, 29_000))
 
 
 def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_killed_job_resumes_bit_identically, make_problem
+from helpers import assert_block_splits_bit_identical, assert_killed_job_resumes_bit_identically, make_problem
 
 from vasc_pipeline import config, costs, engine, kernel, packing
 from vasc_pipeline.config import ConfigError
@@ -82,14 +82,8 @@ def test_tree_schedule_starts_after_the_phase():
 
 def test_block_splits_and_checkpoint_round_trips_across_the_phase_are_bit_identical():
     problem = make_problem(*PACKED)
-    one = engine.initial_state(problem, 5)
-    engine.run_block(problem, one, 60_000)
-    split = engine.initial_state(problem, 5)
-    for n in (1, 9_999, 9_999, 2, 17_000, 22_999):  # the phase ends at 20_000, inside a block
-        engine.run_block(problem, split, n)
-        split = engine.restore_state(problem, engine.state_arrays(split))
-    for name in engine.CHECKPOINT_FIELDS:
-        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+    # The phase ends at 20_000, inside a block.
+    assert_block_splits_bit_identical(problem, 5, (1, 9_999, 9_999, 2, 17_000, 22_999))
 
 
 def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from helpers import (
     FAST_ONE_EXPONENTIAL,
+    assert_block_splits_bit_identical,
     assert_moves_of_every_kind_accepted_and_rejected,
     assert_running_equals_full,
     make_problem,
@@ -236,14 +237,8 @@ def test_a_cold_part_changes_the_cooling_rate_once_where_it_starts():
 def test_block_splits_across_the_start_of_the_cold_part_are_bit_identical():
     overrides = ("tissue=plane2d", "n_terminals=30", "anneal=fast", "anneal.steps=40000")
     problem = make_problem(*overrides, "anneal.cold_from=0.5", "anneal.cold_share=0.5")
-    one = engine.initial_state(problem, seed=4)
-    engine.run_block(problem, one, 40_000)
-    split = engine.initial_state(problem, seed=4)
-    for n in (1, 19_998, 3, 19_998):  # the cold part starts at 20 000, inside a block
-        engine.run_block(problem, split, n)
-        split = engine.restore_state(problem, engine.state_arrays(split))
-    for name in engine.CHECKPOINT_FIELDS:
-        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+    # The cold part starts at 20 000, inside a block.
+    assert_block_splits_bit_identical(problem, 4, (1, 19_998, 3, 19_998))
 
 
 def test_fast_runs_its_hot_half_move_for_move_as_the_one_exponential_over_the_old_budget():
@@ -284,15 +279,7 @@ def test_supply_weight_follows_its_schedule_then_is_the_true_weight():
 
 def test_fast_is_deterministic_across_block_splits_and_checkpoint_round_trips():
     problem = make_problem("tissue=heart", "n_terminals=60", "anneal=fast", "anneal.steps=300000")
-    one = engine.initial_state(problem, seed=8)
-    engine.run_block(problem, one, 300_000)
-    split = engine.initial_state(problem, seed=8)
-    for n in (1, 99_999, 50_000, 123_456):
-        engine.run_block(problem, split, n)
-        split = engine.restore_state(problem, engine.state_arrays(split))  # as a resume would
-    engine.run_block(problem, split, 300_000 - 273_456)
-    for name in engine.CHECKPOINT_FIELDS:
-        np.testing.assert_array_equal(getattr(one, name), getattr(split, name), err_msg=name)
+    assert_block_splits_bit_identical(problem, 8, (1, 99_999, 50_000, 123_456, 300_000 - 273_456))
 
 
 def test_fast_steps_are_exact_and_polish_keeps_the_running_costs_true():
