@@ -36,6 +36,10 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
             assert len(quantiles) == 4 and 0 <= quantiles[0] and quantiles == sorted(quantiles)
     if script.stem == "kernel_throughput":
         assert all(r["moves_per_second"] > 0 and r["coarse_exclusion_ratio"] is None for r in records)
+    if script.stem == "paired_kernels":
+        (row,) = records
+        assert row["n_terminals"] == 20 and row["variant"] == ["supply_shell_width=0"]
+        assert row["speedup"] > 0 and len(row["speedup_by_third"]) == 3
     if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
         absolute = [r for r in records if r.get("fit") == "supply_per_terminal"]
         assert absolute and all(r["alpha"] == pytest.approx(1.5, abs=0.05) for r in absolute)
@@ -72,3 +76,15 @@ def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):
     (record,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
     assert record["overrides"] == coarse[1::2]
     assert 0.3 < record["coarse_exclusion_ratio"] < 3.0
+
+
+def test_paired_kernels_fails_when_the_variant_changes_a_decision(tmp_path):
+    """The paired measurement is only for exact shortcuts: a variant whose states differ stops it."""
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS[0].parent / "paired_kernels.py"), "--quick", "--variant", "p_swap=0.9"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode != 0 and "differs after moves" in done.stderr

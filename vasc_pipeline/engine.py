@@ -219,6 +219,7 @@ def build_problem(config: Any) -> Problem:
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
         early_reject=True,
+        supply_shell_width=kernel.SHELL_WIDTH,
         fixed_inlet_counts=cfg.tissue.inlet_share is not None,
         bifurcation_region=(
             np.zeros((0, 0, 0), dtype=np.uint8)
@@ -404,9 +405,10 @@ def state_arrays(state: kernel.State) -> dict[str, np.ndarray]:
 
 def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.State:
     """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed."""
-    m = 2 * problem.physics.n_terminals
+    n = problem.physics.n_terminals
+    m = 2 * n
     dtypes = {name: _STATE_INT64.get(name, np.float64) for name in CHECKPOINT_FIELDS}
-    dtypes["supply"] = supply_dtype(problem.physics.n_terminals)
+    dtypes["supply"] = supply_dtype(n)
     fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes[name]).copy() for name in CHECKPOINT_FIELDS}
     return kernel.State(
         **fields,
@@ -416,6 +418,11 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.Sta
         scratch_cell_count=np.bincount(
             fields["cell_of"][fields["cell_of"] >= 0], minlength=int(np.prod(problem.model.cell_shape))
         ).astype(np.int64),
+        scratch_shell_voxels=np.zeros(
+            (n, kernel.shell_capacity(problem.model.supply_rho, problem.model.supply_shell_width), 3), dtype=np.int16
+        ),
+        scratch_shell_bands=np.zeros((n, kernel.SHELL_BANDS), dtype=np.int64),
+        scratch_shell_frame=np.zeros((n, 4)),
     )
 
 

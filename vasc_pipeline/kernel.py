@@ -86,6 +86,8 @@ Model = namedtuple(
         "fixed_inlet_counts",  # tissue.inlet_share: a swap between inlet trees must keep their terminal counts
         "bifurcation_region",  # uint8 (nz, ny, nx): where a bifurcation may lie (tissue.bifurcation_reach);
         # shape (0, 0, 0): anywhere in the grid's box
+        "supply_shell_width",  # float, voxels: the widest supply shell a terminal keeps (SHELL_WIDTH;
+        # 0: none, every supply change row by row; the same sums either way)
     ],
 )
 
@@ -114,6 +116,11 @@ State = namedtuple(
         "scratch_stack",
         "scratch_pressure",
         "scratch_cell_count",  # int64: nodes per neighbour cell (derived from cell_of, so never checkpointed)
+        "scratch_shell_voxels",  # int16 (N, shell_capacity, 3) [x, y, z]: per terminal, the tissue voxels
+        # near its supply sphere's surface (_shell_build; derived from positions, never checkpointed)
+        "scratch_shell_bands",  # int64 (N, SHELL_BANDS): where each band of the shell's voxels ends
+        "scratch_shell_frame",  # float64 (N, 4): the shell's centre (voxel coordinates x, y, z) and
+        # width; width 0: no shell
     ],
 )
 
@@ -459,7 +466,8 @@ def _inside(i, u, d2, e2, rho2):
     return (dx * dx + d2) + e2 <= rho2
 
 
-_ROUNDING = 1e-9  # an interval end this close to a voxel centre is settled by the exact test
+_ROUNDING = 1e-9  # an interval end this close to a voxel centre is settled by the exact test ...
+_TANGENT = 1e-12  # ... and every voxel of a row this close to tangent (r^2 below it times rho^2)
 
 
 @jit_norc_inline
@@ -468,16 +476,21 @@ def _row_interval(u, d2, e2, rho2, n):
 
     ``d2``, ``e2``: squared offsets of the row from the centre in the other two axes; ``u``
     the centre's coordinate along the row. The square root gives the ends; where an end
-    falls within rounding of a voxel centre the exact test settles it, so the result
-    equals a voxel-by-voxel test. Returns (lo, hi), empty when lo > hi.
+    falls within rounding of a voxel centre, or the row is nearly tangent to the sphere, the
+    exact test settles it, so the result equals a voxel-by-voxel test. Returns (lo, hi),
+    empty when lo > hi.
     """
     rem = (rho2 - e2) - d2
     if rem < -_ROUNDING * rho2:
         return 1, 0
     r = math.sqrt(max(rem, 0.0))
+    # The test's sums round by under 1e-15 rho^2, which moves an end by under 1e-15 rho^2 / (2 r):
+    # within the window below unless the row is nearly tangent (r < 1e-6 rho).
+    window = _ROUNDING * (1.0 + rho2)
+    tangent = rem < _TANGENT * rho2
     x = u - r
     lo = math.ceil(x)
-    if lo - x < _ROUNDING or x - (lo - 1) < _ROUNDING:
+    if tangent or lo - x < window or x - (lo - 1) < window:
         c = math.floor(u + 0.5)  # nearest voxel centre: inside if any is
         if not _inside(c, u, d2, e2, rho2):
             return 1, 0
@@ -488,7 +501,7 @@ def _row_interval(u, d2, e2, rho2, n):
             lo += 1
     x = u + r
     hi = math.floor(x)
-    if x - hi < _ROUNDING or (hi + 1) - x < _ROUNDING:
+    if tangent or x - hi < window or (hi + 1) - x < window:
         c = math.floor(u + 0.5)
         if not _inside(c, u, d2, e2, rho2):
             return 1, 0
@@ -644,6 +657,173 @@ def supply_move(model, supply, old, new):
     _sphere_change(model, supply, old, new, True)
 
 
+# Supply shells. Once the adapted terminal steps are a small fraction of a voxel (the second
+# half of a run), a move changes the coverage of only the few voxels whose centres lie that
+# close to the sphere's surface, yet the rows of both spheres cost ~1 us to compute. So a
+# terminal keeps its shell: the tissue voxels within a width of its sphere's surface, listed
+# once around a centre, in bands of their distance to the surface. While the terminal and its
+# proposed position both stay closer to that centre than the width (less a margin far above
+# the distances' rounding), no voxel outside the shell can change coverage, nor any of a band
+# farther from the surface than the two positions' distance to the centre; testing the
+# others with the row code's own expression gives the same change, bit for bit
+# (benchmarks/README.md, "Supply shells").
+SHELL_WIDTH = 0.3  # the widest shell, voxels: ~120 voxels at the default supply radius of 4 voxels
+SHELL_BANDS = 8
+_SHELL_STEPS = 4.0  # a new shell's width, in the longest adapted terminal step (sqrt(3) half-widths)
+_SHELL_MARGIN = 1e-6  # voxels
+
+
+def shell_capacity(rho, width):
+    """Voxels a terminal's shell array holds: 1.5 times a shell's volume (8 pi rho^2 width), plus 32.
+    Lattice points in such shells stay within 1.2 times it (rho 2 to 6, width 0.3); a shell
+    that does not fit is not used (its supply changes are computed row by row)."""
+    return int(math.ceil(1.5 * 8.0 * math.pi * rho * rho * width)) + 32
+
+
+@jit_norc
+def _shell_voxels(supply, rho, cx, cy, cz, width, voxels, bands, place):
+    """Visit every tissue voxel whose centre lies within ``width`` of the sphere's surface (and
+    perhaps a few more), in row order, each in band min(B |distance - rho| / width, B - 1) of
+    the B = ``bands.size``. Counting (``place`` False): adds each to its band's count in ``bands``.
+    Placing: writes [x, y, z] to ``voxels`` at its band's entry of ``bands`` and advances it.
+    Returns the number visited."""
+    nz, ny, nx = supply.shape
+    n_bands = bands.size
+    inner2 = max(rho - width, 0.0) ** 2
+    outer = rho + width
+    outer2 = outer * outer
+    n = 0
+    for k in range(max(math.floor(cz - outer), 0), min(math.ceil(cz + outer), nz - 1) + 1):
+        e2 = (k - cz) * (k - cz)
+        for j in range(max(math.floor(cy - outer), 0), min(math.ceil(cy + outer), ny - 1) + 1):
+            q = (j - cy) * (j - cy) + e2
+            if q > outer2:
+                continue
+            # |i - cx| in [a, b]: a run on either side of the centre (one run where a <= 0)
+            a = math.sqrt(max(inner2 - q, 0.0)) - _SHELL_MARGIN
+            b = math.sqrt(outer2 - q) + _SHELL_MARGIN
+            left_hi = min(math.floor(cx - a), nx - 1)
+            for lo, hi in (
+                (max(math.ceil(cx - b), 0), left_hi),
+                (max(math.ceil(cx + a), left_hi + 1, 0), min(math.floor(cx + b), nx - 1)),
+            ):
+                for i in range(lo, hi + 1):
+                    if supply[k, j, i] < 0:
+                        continue
+                    dx = i - cx
+                    band = min(int(abs(math.sqrt(dx * dx + q) - rho) * n_bands / width), n_bands - 1)
+                    if place:
+                        slot = bands[band]
+                        voxels[slot, 0] = i
+                        voxels[slot, 1] = j
+                        voxels[slot, 2] = k
+                        bands[band] = slot + 1
+                    else:
+                        bands[band] += 1
+                    n += 1
+    return n
+
+
+@jit_norc
+def _shell_build(supply, rho, cx, cy, cz, width, voxels, bands):
+    """List into ``voxels`` (int16 (capacity, 3), [x, y, z]) every tissue voxel of ``supply``
+    whose centre lies within ``width`` of the surface of the sphere of radius ``rho`` centred
+    at (cx, cy, cz) (all in voxel units), and perhaps a few more, band by band: band b (of
+    B = ``bands.size``, distances to the surface from b width / B) ends before ``bands[b]``.
+    Returns their number, or -1 when they do not fit (or the grid is too large for int16)."""
+    if max(supply.shape) > 32767:
+        return -1
+    bands[:] = 0
+    if _shell_voxels(supply, rho, cx, cy, cz, width, voxels, bands, False) > voxels.shape[0]:
+        return -1
+    total = 0
+    for b in range(bands.size):  # counts to each band's first entry
+        count = bands[b]
+        bands[b] = total
+        total += count
+    _shell_voxels(supply, rho, cx, cy, cz, width, voxels, bands, True)  # each band's entry to its end
+    return total
+
+
+@jit_norc
+def _shell_change(supply, rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write):
+    """:func:`_sphere_rows` for a sphere moving from o to p (voxel coordinates) when no voxel
+    can change coverage but those of the shell (``voxels``, ``bands``, ``width``) within
+    ``reach`` of the surface: each voxel of the bands that reach is tested as the row code
+    tests a voxel (:func:`_inside`), and its count change is :func:`_range_change`'s."""
+    rho2 = rho * rho
+    n_bands = bands.size
+    delta = 0
+    first = 0
+    for band in range(n_bands):
+        if band * width / n_bands > reach:  # this band's voxels and the later ones lie farther
+            break
+        for t in range(first, bands[band]):
+            i = np.int64(voxels[t, 0])
+            j = np.int64(voxels[t, 1])
+            k = np.int64(voxels[t, 2])
+            was = _inside(i, ox, (j - oy) * (j - oy), (k - oz) * (k - oz), rho2)
+            now = _inside(i, px, (j - py) * (j - py), (k - pz) * (k - pz), rho2)
+            if was == now:
+                continue
+            b = np.int64(supply[k, j, i])
+            if now:
+                delta += (2 * b - 1) - 9 * (b == 0)
+            else:
+                delta += (3 - 2 * b) + 9 * (b == 1)
+            if write:
+                supply[k, j, i] += 1 if now else -1
+        first = bands[band]
+    return float(delta)
+
+
+@jit_norc_inline
+def _shell_reach(model, state, t, ox, oy, oz, px, py, pz):
+    """How far from its sphere's surface a voxel may lie and still change coverage when terminal
+    t moves from o to p (voxel coordinates), if its shell can evaluate the move; else -1.
+
+    A shell around centre c of width w lists every voxel whose centre's distance to the sphere's
+    surface is at most w; with the sphere at o or p that distance changes by at most |o - c| +
+    |p - o|, the reach, and a voxel farther than that from the surface keeps its coverage. A
+    new shell, around o, is listed when the adapted terminal steps allow one no wider than
+    ``supply_shell_width`` (or the present one is twice as wide as they need).
+    """
+    if model.supply_shell_width <= 0.0:
+        return -1.0
+    step = math.sqrt((px - ox) ** 2 + (py - oy) ** 2 + (pz - oz) ** 2)
+    width = _SHELL_STEPS * math.sqrt(3.0) * state.step_size[0] / model.voxel_size
+    frame = state.scratch_shell_frame[t]  # centre, width (0: no shell)
+    if frame[3] <= 2.0 * width:
+        reach = math.sqrt((ox - frame[0]) ** 2 + (oy - frame[1]) ** 2 + (oz - frame[2]) ** 2) + step
+        if reach < frame[3] - _SHELL_MARGIN:
+            return reach + _SHELL_MARGIN
+    if width > model.supply_shell_width or step >= width - _SHELL_MARGIN:
+        return -1.0
+    n = _shell_build(
+        state.supply, model.supply_rho, ox, oy, oz, width, state.scratch_shell_voxels[t], state.scratch_shell_bands[t]
+    )
+    frame[0] = ox
+    frame[1] = oy
+    frame[2] = oz
+    frame[3] = width if n >= 0 else 0.0
+    return step + _SHELL_MARGIN if n >= 0 else -1.0
+
+
+@jit_norc_inline
+def _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, write):
+    """C_s change of terminal t's sphere moving from o to p (voxel coordinates): on its shell
+    when :func:`_shell_reach` gave a reach (>= 0), else row by row; with ``write`` the counts
+    are updated."""
+    if reach >= 0.0:
+        voxels, bands, width = (
+            state.scratch_shell_voxels[t],
+            state.scratch_shell_bands[t],
+            state.scratch_shell_frame[t, 3],
+        )
+        return _shell_change(state.supply, model.supply_rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write)
+    return _sphere_rows(state.supply, model.supply_rho, ox, oy, oz, px, py, pz, write)
+
+
 @jit_norc
 def pressure_cost(model, state):
     """C_p from scratch: Poiseuille drops down every inlet's tree (O(N), depth-first)."""
@@ -794,6 +974,7 @@ def initialise(model, state):
     state.compensation[:] = 0.0
     state.seg_length[:] = 0.0
     supply = state.supply
+    state.scratch_shell_frame[:, 3] = 0.0  # no shell of a grid this model may not share
     nz, ny, nx = supply.shape
     for k in range(nz):
         for j in range(ny):
@@ -1091,8 +1272,13 @@ def _translate_node(model, state, i, new, temp):
         old_exc += _segment_exclusion_cost(model, state, c0) + _segment_exclusion_cost(model, state, c1)
     # supply (terminals only)
     d_sup = 0.0
-    if is_terminal and model.supply_on:
-        d_sup = supply_move_delta(model, state.supply, pos[i], new)
+    supply_moves = is_terminal and model.supply_on
+    if supply_moves:
+        t = i - model.n_inlets
+        ox, oy, oz = _voxel_coords(model, pos[i, 0], pos[i, 1], pos[i, 2])
+        px, py, pz = _voxel_coords(model, new[0], new[1], new[2])
+        reach = _shell_reach(model, state, t, ox, oy, oz, px, py, pz)
+        d_sup = _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, False)
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
     # early rejection on a lower bound
     u = -1.0
@@ -1155,8 +1341,8 @@ def _translate_node(model, state, i, new, temp):
     if not _accept_with(d_cost, temp, rng, u):
         return REJECTED
     state.counters[MOVE_COUNTERS[cls, N_ACCEPTED]] += 1
-    if is_terminal and model.supply_on:
-        supply_move(model, state.supply, pos[i], new)
+    if supply_moves:
+        _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, True)
     if model.p_local > 0.0:
         _cell_update(model, state, i, new)
     pos[i, 0] = new[0]
