@@ -537,12 +537,22 @@ def in_tissue(model, p):
 
 
 @jit_norc_inline
-def _range_change(supply, k, j, lo, hi, sign, write):
-    """C_s change when voxels lo..hi of row (k, j) gain ``sign``.
+def _gain_change(b):
+    """C_s change when a tissue voxel covered b times gains a sphere: s(0) = 10,
+    s(b) = (b - 1)^2, so s(b + 1) - s(b) = 2b - 1 - 9 [b = 0]."""
+    return (2 * b - 1) - 9 * (b == 0)
 
-    s(0) = 10, s(b) = (b - 1)^2: s(b + 1) - s(b) = 2b - 1 - 9 [b = 0] and
-    s(b - 1) - s(b) = 3 - 2b + 9 [b = 1]; non-tissue voxels hold -1 and contribute 0.
-    """
+
+@jit_norc_inline
+def _loss_change(b):
+    """C_s change when a tissue voxel covered b times loses a sphere: s(b - 1) - s(b) = 3 - 2b + 9 [b = 1]."""
+    return (3 - 2 * b) + 9 * (b == 1)
+
+
+@jit_norc_inline
+def _range_change(supply, k, j, lo, hi, sign, write):
+    """C_s change when voxels lo..hi of row (k, j) gain ``sign`` (:func:`_gain_change`,
+    :func:`_loss_change`); non-tissue voxels hold -1 and contribute 0."""
     # The loops exit early on a count below -1 (none is): LLVM does not vectorise loops
     # with two exits, and these are a few voxels long, where a vectorised loop's set-up
     # and remainder cost more than they save (measured: -25 % time per supply delta).
@@ -552,13 +562,13 @@ def _range_change(supply, k, j, lo, hi, sign, write):
             b = np.int64(supply[k, j, i])
             if b < -1:
                 break
-            delta += (b >= 0) * ((2 * b - 1) - 9 * (b == 0))
+            delta += (b >= 0) * _gain_change(b)
     else:
         for i in range(lo, hi + 1):
             b = np.int64(supply[k, j, i])
             if b < -1:
                 break
-            delta += (b >= 0) * ((3 - 2 * b) + 9 * (b == 1))
+            delta += (b >= 0) * _loss_change(b)
     if write:
         for i in range(lo, hi + 1):
             if supply[k, j, i] >= 0:
@@ -750,7 +760,7 @@ def _shell_change(supply, rho, voxels, bands, width, reach, ox, oy, oz, px, py, 
     """:func:`_sphere_rows` for a sphere moving from o to p (voxel coordinates) when no voxel
     can change coverage but those of the shell (``voxels``, ``bands``, ``width``) within
     ``reach`` of the surface: each voxel of the bands that reach is tested as the row code
-    tests a voxel (:func:`_inside`), and its count change is :func:`_range_change`'s."""
+    tests a voxel (:func:`_inside`), and its count change is the rows' (:func:`_gain_change`, :func:`_loss_change`)."""
     rho2 = rho * rho
     n_bands = bands.size
     delta = 0
@@ -767,10 +777,7 @@ def _shell_change(supply, rho, voxels, bands, width, reach, ox, oy, oz, px, py, 
             if was == now:
                 continue
             b = np.int64(supply[k, j, i])
-            if now:
-                delta += (2 * b - 1) - 9 * (b == 0)
-            else:
-                delta += (3 - 2 * b) + 9 * (b == 1)
+            delta += _gain_change(b) if now else _loss_change(b)
             if write:
                 supply[k, j, i] += 1 if now else -1
         first = bands[band]
