@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_moves_of_every_kind_accepted_and_rejected, assert_running_equals_full, make_problem
+from helpers import (
+    TRUE_EXCLUSION_MAP,
+    assert_moves_of_every_kind_accepted_and_rejected,
+    assert_running_equals_full,
+    make_problem,
+)
 
 from vasc_pipeline import engine, kernel
 from vasc_pipeline.config import ConfigError, compose, to_run_config, validate
@@ -77,6 +82,7 @@ def test_a_bifurcation_move_out_of_the_region_is_illegal():
         "anneal.T_end=1e299",
         "anneal.steps=10",
         "tissue.bifurcation_reach=0",
+        *TRUE_EXCLUSION_MAP,  # the kernel is called below with problem.model
     )
     state = engine.initial_state(problem, seed=2)
     lo, _ = problem.tissue.bounds

@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_block_splits_bit_identical, assert_killed_job_resumes_bit_identically, make_problem
+from helpers import (
+    TRUE_EXCLUSION_MAP,
+    assert_block_splits_bit_identical,
+    assert_killed_job_resumes_bit_identically,
+    make_problem,
+)
 
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
@@ -63,6 +68,16 @@ def _running_equals(problem, model, state):
     np.testing.assert_array_equal(state.seg_exclusion, fresh.seg_exclusion)
 
 
+def test_fast_sums_its_first_30_percent_on_a_twice_coarser_map_and_the_other_schedules_never():
+    steps = ("tissue=heart", "n_terminals=120", "anneal.steps=1000000")
+    fast = make_problem(*steps, "anneal=fast")
+    assert fast.coarse_steps == 300_000
+    assert fast.coarse_model.depth_voxel_size == 2 * fast.model.depth_voxel_size
+    for schedule in ("fast_v1", "paper"):
+        other = make_problem(*steps, f"anneal={schedule}")
+        assert other.coarse_model is None and other.coarse_steps == 0
+
+
 def test_running_sums_follow_the_coarse_map_then_the_true_one():
     steps = 1_000_000
     problem = make_problem("tissue=heart", "n_terminals=120", "anneal=fast", f"anneal.steps={steps}", *COARSE)
@@ -77,7 +92,7 @@ def test_running_sums_follow_the_coarse_map_then_the_true_one():
     engine.run_block(problem, state, steps - 400_000)
     _running_equals(problem, problem.model, state)
     # The same run on the true map throughout: the same schedule, another trajectory.
-    plain = make_problem("tissue=heart", "n_terminals=120", "anneal=fast", f"anneal.steps={steps}")
+    plain = make_problem("tissue=heart", "n_terminals=120", "anneal=fast", f"anneal.steps={steps}", *TRUE_EXCLUSION_MAP)
     reference = engine.initial_state(plain, 5)
     np.testing.assert_array_equal(reference.schedule, state.schedule)
     assert plain.coarse_model is None and plain.coarse_steps == 0
@@ -111,18 +126,24 @@ def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):
     assert_killed_job_resumes_bit_identically(overrides, kill_before=600_000)
 
 
+BOTH = "anneal.coarse_exclusion_factor and anneal.coarse_exclusion_phase"
+PHASE = r"phase must lie in \(0, 1\)"
+
+
 @pytest.mark.parametrize(
-    "overrides, field",
+    "schedule, overrides, field",
     [
-        ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_factor and anneal.coarse_exclusion_phase"),
-        ("anneal.coarse_exclusion_phase=0.3", "anneal.coarse_exclusion_factor and anneal.coarse_exclusion_phase"),
-        ("anneal.coarse_exclusion_factor=1 anneal.coarse_exclusion_phase=0.3", r"factor must be an integer in \[2, 8"),
-        ("anneal.coarse_exclusion_factor=9 anneal.coarse_exclusion_phase=0.3", r"factor must be an integer in \[2, 8"),
-        ("anneal.coarse_exclusion_factor=2.5 anneal.coarse_exclusion_phase=0.3", "anneal.coarse_exclusion_factor"),
-        ("anneal.coarse_exclusion_factor=2 anneal.coarse_exclusion_phase=0", r"phase must lie in \(0, 1\)"),
-        ("anneal.coarse_exclusion_factor=2 anneal.coarse_exclusion_phase=1.0", r"phase must lie in \(0, 1\)"),
+        ("fast", "anneal.coarse_exclusion_phase=null", BOTH),  # fast sets both (2, 0.3) ...
+        ("fast", "anneal.coarse_exclusion_factor=null", BOTH),
+        ("fast_v1", "anneal.coarse_exclusion_factor=2", BOTH),  # ... fast_v1 neither
+        ("fast_v1", "anneal.coarse_exclusion_phase=0.3", BOTH),
+        ("fast", "anneal.coarse_exclusion_factor=1", r"factor must be an integer in \[2, 8"),
+        ("fast", "anneal.coarse_exclusion_factor=9", r"factor must be an integer in \[2, 8"),
+        ("fast", "anneal.coarse_exclusion_factor=2.5", "anneal.coarse_exclusion_factor"),
+        ("fast", "anneal.coarse_exclusion_phase=0", PHASE),
+        ("fast_v1", "anneal.coarse_exclusion_factor=2 anneal.coarse_exclusion_phase=1.0", PHASE),
     ],
 )
-def test_bad_coarse_exclusion_settings_name_the_field(overrides, field):
+def test_bad_coarse_exclusion_settings_name_the_field(schedule, overrides, field):
     with pytest.raises(ConfigError, match=field.replace("anneal.", r"anneal\.")):
-        config.compose(["anneal=fast", *overrides.split()])
+        config.compose([f"anneal={schedule}", *overrides.split()])

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from helpers import (
+    TRUE_EXCLUSION_MAP,
     ancestors,
     assert_moves_of_every_kind_accepted_and_rejected,
     assert_running_equals_full,
@@ -99,8 +100,16 @@ def test_same_config_and_seed_give_identical_trees_and_block_splits_are_bit_iden
 
 @pytest.fixture(scope="module")
 def small_problem():
-    # Huge temperature: every legal proposal is accepted, so legality alone decides.
-    return make_problem("tissue=box", "n_terminals=12", "anneal.T_start=1e300", "anneal.T_end=1e299", "anneal.steps=10")
+    # Huge temperature: every legal proposal is accepted, so legality alone decides. The tests
+    # call the kernel with problem.model, the true exclusion map, from the first move.
+    return make_problem(
+        "tissue=box",
+        "n_terminals=12",
+        "anneal.T_start=1e300",
+        "anneal.T_end=1e299",
+        "anneal.steps=10",
+        *TRUE_EXCLUSION_MAP,
+    )
 
 
 def test_swap_rejects_ancestors_and_siblings(small_problem):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from helpers import (
     FAST_ONE_EXPONENTIAL,
+    TRUE_EXCLUSION_MAP,
     assert_block_splits_bit_identical,
     assert_moves_of_every_kind_accepted_and_rejected,
     assert_running_equals_full,
@@ -95,7 +96,7 @@ def test_swaps_at_a_fixed_temperature_sample_the_boltzmann_distribution(partners
     temperature, on a 4-terminal tree whose nodes never move, visit every tree they can reach
     with probability exp(-C/T)/Z. (A sampler 10 % off in temperature is 0.04 away in total
     variation; this one is ~0.01.)"""
-    problem = make_problem("tissue=sphere", "n_terminals=4", "anneal=fast", partners)
+    problem = make_problem("tissue=sphere", "n_terminals=4", "anneal=fast", partners, *TRUE_EXCLUSION_MAP)
     problem = dataclasses.replace(problem, model=problem.model._replace(p_swap=1.0))
     state = engine.initial_state(problem, seed=3)
     k = problem.physics.n_inlets
