@@ -70,16 +70,6 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases
     problem, run_steps, _ = trajectory_problem(base, run_budget)
     state = engine.initial_state(problem, seed=0)
     engine.run_block(problem, engine.restore_state(problem, engine.state_arrays(state)), 1000)  # compile
-    m = problem.model
-    variants = {
-        "all": m,
-        "swap": m._replace(p_swap=1.0),
-        "swap_without_exclusion": m._replace(p_swap=1.0, exclusion_on=False),
-        "translate": m._replace(p_swap=0.0),
-        "bifurcation_translate": m._replace(p_swap=0.0, move_terminals=False),
-        "translate_without_supply": m._replace(p_swap=0.0, supply_on=False),
-        "translate_without_exclusion": m._replace(p_swap=0.0, exclusion_on=False),
-    }
     rows = []
     done = 0
     for frac in sorted(phases):
@@ -87,6 +77,16 @@ def profile(n_terminals: int, moves: int, anneal: str, run_budget: float, phases
         engine.run_block(problem, state, step - done)
         done = step
         arrays = engine.state_arrays(state)
+        m = engine.model_at(problem, step)  # the coarse exclusion map's early in a `fast` run
+        variants = {
+            "all": m,
+            "swap": m._replace(p_swap=1.0),
+            "swap_without_exclusion": m._replace(p_swap=1.0, exclusion_on=False),
+            "translate": m._replace(p_swap=0.0),
+            "bifurcation_translate": m._replace(p_swap=0.0, move_terminals=False),
+            "translate_without_supply": m._replace(p_swap=0.0, supply_on=False),
+            "translate_without_exclusion": m._replace(p_swap=0.0, exclusion_on=False),
+        }
         ns, acc = {}, {}
         for name, model in variants.items():
             ns[name], acc[name] = ns_per_move(problem, arrays, model, moves)

@@ -66,6 +66,8 @@ def phase_rates(problem, moves: int, warmup: int) -> dict[str, float]:
     rates = {}
     for phase, frac in (("start", 0.0), ("middle", 0.5), ("end", 1.0)):
         state.counters[kernel.COUNTER_STEP] = int(frac * total)
+        # Segment sums on the map in force there (a jump can cross the coarse map's switch).
+        kernel.recompute_exclusion(engine.model_at(problem, int(frac * total)), state)
         engine.run_block(problem, state, warmup)
         t = time.thread_time()
         engine.run_block(problem, state, moves)

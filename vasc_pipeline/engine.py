@@ -343,6 +343,12 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
     return t_start, float(t_end)
 
 
+def model_at(problem: Problem, step: int) -> kernel.Model:
+    """The kernel model the proposal at ``step`` runs on: before ``problem.coarse_steps`` the
+    coarse exclusion map's (anneal.coarse_exclusion_*), else the true one's."""
+    return problem.coarse_model if step < problem.coarse_steps else problem.model
+
+
 def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
     """Propose ``n_steps`` moves (in place): packing moves first while the packing phase
     lasts (:mod:`vasc_pipeline.packing`), then the tree anneal's; before
