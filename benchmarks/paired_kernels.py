@@ -1,17 +1,17 @@
 """An exact kernel shortcut measured against the kernel without it, chunk by chunk along one run.
 
-A shortcut that changes no decision (``Model.supply_shell_width``, ``Model.early_reject``) is
-best measured inside one process, where both kernels see the same machine state: the
-trajectory of ``kernel_throughput.py`` (the heart, seed-0 initial tree, ``--run-budget`` of the
-schedule's default moves) is cut into ``--chunks`` pieces, and each piece is run from the same
-state by the kernel as built and by the one with the ``--variant`` fields of its ``Model``
-changed, alternating which goes first, each restored just before it runs from the checkpoint
-arrays of the state the pieces before reached (as a resume would: scratch arrays, such as
-supply shells, start empty). The two states must then be equal (checked after every piece,
-else the script fails). Times are thread times, summed over each third of the run. A
-variant equal to the built kernel measures the method's own spread: within 3 % per third at
-N = 1000 (4-6 % when the two states were allocated in a fixed order, a memory-layout bias;
-benchmarks/README.md, "Supply shells"). One JSON line per N:
+A shortcut that changes no decision (``Model.supply_shell_width``, ``Model.early_reject``,
+``Model.prefetch_lead``) is best measured inside one process, where both kernels see the
+same machine state: the trajectory of ``kernel_throughput.py`` (the heart, seed-0 initial
+tree, ``--run-budget`` of the schedule's default moves) is cut into ``--chunks`` pieces, and
+each piece is run from the same state by the kernel as built and by the one with the
+``--variant`` fields of its ``Model`` changed, alternating which goes first, each restored
+just before it runs from the checkpoint arrays of the state the pieces before reached (as a
+resume would: scratch arrays, such as supply shells, start empty). The two states must then
+be equal (checked after every piece, else the script fails). Times are thread times, summed
+over each third of the run. A variant equal to the built kernel measures the method's own
+spread: within 3 % per third at N = 1000 (4-6 % when the two states were allocated in a
+fixed order, a memory-layout bias; benchmarks/README.md, "Supply shells"). One JSON line per N:
 
     moves_per_second: {"built": ..., "variant": ...} over the run; ..._by_third: the same per third;
     speedup: built over variant, over the run and per third; median_chunk_speedup.

@@ -58,6 +58,7 @@ def traverse_all(depth_index, depth_values, origin, voxel_size, p0, p1, out):
             p1[k, 1],
             p1[k, 2],
             np.inf,
+            kernel.PREFETCH_LEAD,
         )
 
 

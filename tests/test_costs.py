@@ -208,6 +208,21 @@ def test_traversal_leaping_empty_blocks_gives_the_walks_sum_to_the_bit(sphere_pr
         assert kernel.segment_exclusion(leap, p0, p1) == pytest.approx(expected, rel=1e-12, abs=1e-300)
 
 
+def test_prefetching_ahead_changes_no_traversal_sum(sphere_problem):
+    """The prefetch is a hint: with any lead (none, the default, one far past the map's end)
+    every sum is the same float, for segments inside, across and outside the grid."""
+    model = sphere_problem.model
+    assert model.prefetch_lead == kernel.PREFETCH_LEAD > 0
+    pts = random_points(sphere_problem, 600, 3, spread=2.0)
+    leads = [model._replace(prefetch_lead=lead) for lead in (0.0, 1.0, 1e9)]
+    n_nonzero = 0
+    for p0, p1 in zip(pts[::2], pts[1::2]):
+        got = kernel.segment_exclusion(model, p0, p1)
+        assert all(kernel.segment_exclusion(m, p0, p1) == got for m in leads)
+        n_nonzero += got > 0
+    assert n_nonzero > 50
+
+
 def test_supply_spheres_match_brute_force_voxel_for_voxel(sphere_problem):
     problem = sphere_problem
     state = engine.initial_state(problem, seed=5)

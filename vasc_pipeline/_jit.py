@@ -1,10 +1,15 @@
-"""Numba flags in one place (STYLE: one switch for cache/nogil/fastmath).
+"""Numba flags in one place (STYLE: one switch for cache/nogil/fastmath), and the one
+intrinsic the kernel needs that numba lacks (a cache prefetch).
 
 ``nogil=True`` keeps Dask worker heartbeats alive during long kernel calls (SPEC section 8);
 ``fastmath`` stays off so that incremental and full costs agree and runs are bit-identical.
 """
 
 import numba
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 _FLAGS = dict(nogil=True, cache=True, fastmath=False, error_model="numpy")
 
@@ -21,3 +26,21 @@ jit_inline = numba.njit(**_FLAGS, inline="always")
 # move. The caller keeps every array alive for the call, so the counts are not needed.
 jit_norc = numba.njit(**_FLAGS, _nrt=False)
 jit_norc_inline = numba.njit(**_FLAGS, _nrt=False, inline="always")
+
+
+@intrinsic
+def prefetch(typingctx, array, index):
+    """Ask the CPU to bring ``array[index]`` towards the cache (LLVM's prefetch: read,
+    high locality). Only a hint: no value changes, and an address past the array may be
+    given without a fault, though callers keep inside it."""
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        address = builder.gep(data, [args[1]])
+        i32 = ir.IntType(32)
+        fnty = ir.FunctionType(ir.VoidType(), [address.type, i32, i32, i32])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
+        builder.call(fn, [address, i32(0), i32(3), i32(1)])  # read, keep in all levels, data
+        return context.get_dummy_value()
+
+    return types.void(array, index), codegen

@@ -220,6 +220,7 @@ def build_problem(config: Any) -> Problem:
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
         early_reject=True,
         supply_shell_width=kernel.SHELL_WIDTH,
+        prefetch_lead=kernel.PREFETCH_LEAD,
         fixed_inlet_counts=cfg.tissue.inlet_share is not None,
         bifurcation_region=(
             np.zeros((0, 0, 0), dtype=np.uint8)

@@ -23,7 +23,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ._jit import jit, jit_norc, jit_norc_inline
+from ._jit import jit, jit_norc, jit_norc_inline, prefetch
 from .costs import COST_TERMS
 from .physics import TABLE_EXCLUSION, TABLE_FLOW, TABLE_POWER, TABLE_RESISTANCE, TABLE_VOLUME
 from .rng import next_below, next_double
@@ -88,6 +88,8 @@ Model = namedtuple(
         # shape (0, 0, 0): anywhere in the grid's box
         "supply_shell_width",  # float, voxels: the widest supply shell a terminal keeps (SHELL_WIDTH;
         # 0: none, every supply change row by row; the same sums either way)
+        "prefetch_lead",  # float, voxels: how far ahead of a traversal the depth map is prefetched
+        # (PREFETCH_LEAD; 0: not at all; the same sums either way)
     ],
 )
 
@@ -237,6 +239,8 @@ def _distance3(a, b):
 # Side of the grid-aligned blocks the traversal leaps over (a power of two).
 LEAP_BLOCK = 16
 _BLOCK_MASK = LEAP_BLOCK - 1
+# Voxels ahead of the walk whose depth is prefetched (benchmarks/README.md, "Prefetching the depth map").
+PREFETCH_LEAD = 16.0
 
 
 def leap_map(distance):
@@ -317,13 +321,17 @@ def segment_exclusion_capped(model, p0, p1, cap):
     """
     o = model.depth_origin
     index, values, h = model.depth_index, model.depth_values, model.depth_voxel_size
-    return _traverse(index, values, o[0], o[1], o[2], h, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2], cap)
+    return _traverse(
+        index, values, o[0], o[1], o[2], h, p0[0], p0[1], p0[2], p1[0], p1[1], p1[2], cap, model.prefetch_lead
+    )
 
 
 @jit_norc
-def _traverse(depth_index, depth_values, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z, cap):
+def _traverse(depth_index, depth_values, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y, p1z, cap, lead):
     """:func:`segment_exclusion_capped` on scalars: a call passes a few words, not the whole
-    ``Model`` (numba passes a named tuple field by field, each array as its full descriptor)."""
+    ``Model`` (numba passes a named tuple field by field, each array as its full descriptor).
+    ``lead``: voxels ahead of the walk whose cache line is prefetched (``Model.prefetch_lead``;
+    0: none); the sum does not depend on it."""
     nz, ny, nx = depth_index.shape
     flat = depth_index.reshape(-1)
     ux = (p0x - ox) / h
@@ -371,12 +379,20 @@ def _traverse(depth_index, depth_values, ox, oy, oz, h, p0x, p0y, p0z, p1x, p1y,
     # before it moves, so it never leaves the map. Unsigned, so that numba adds no
     # negative-index fix-up to each load; a backward stride is the modulo-2^64 negative.
     idx = np.uint64((iz * ny + iy) * nx + ix)
+    # The voxel ``lead`` steps ahead is, to a voxel or so, a fixed flat offset away;
+    # prefetching it lets its load start before the walk's mispredicted axis choices would
+    # let the core reach it. Exact position does not matter: only its cache line.
+    lead_t = lead / (abs(dx) + abs(dy) + abs(dz))
+    ahead = np.uint64(round(dx * lead_t) + nx * (round(dy * lead_t) + ny * round(dz * lead_t)))
+    n_flat = np.uint64(flat.size) if lead > 0.0 else np.uint64(0)
     stride_x = np.uint64(1) if sx > 0 else np.uint64(-1)
     stride_y = np.uint64(nx) if sy > 0 else np.uint64(-nx)
     stride_z = np.uint64(nx * ny) if sz > 0 else np.uint64(-nx * ny)
     t = t0
     acc = 0.0
     while True:
+        if idx + ahead < n_flat:
+            prefetch(flat, idx + ahead)
         tn = min(tx, ty, tz, t1)
         depth = depth_values[flat[idx]]
         if depth > 0.0:
