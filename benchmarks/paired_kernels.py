@@ -1,9 +1,9 @@
 """An exact kernel shortcut measured against the kernel without it, chunk by chunk along one run.
 
 A shortcut that changes no decision (``Model.supply_shell_width``, ``Model.early_reject``,
-``Model.prefetch_lead``) is best measured inside one process, where both kernels see the
-same machine state: the trajectory of ``kernel_throughput.py`` (the heart, seed-0 initial
-tree, ``--run-budget`` of the schedule's default moves) is cut into ``--chunks`` pieces, and
+``Model.prefetch_lead``, ``Model.prefetch_supply``) is best measured inside one process, where
+both kernels see the same machine state: the trajectory of ``kernel_throughput.py`` (the heart,
+seed-0 initial tree, ``--run-budget`` of the schedule's default moves) is cut into ``--chunks`` pieces, and
 each piece is run from the same state by the kernel as built and by the one with the
 ``--variant`` fields of its ``Model`` changed, alternating which goes first, each restored
 just before it runs from the checkpoint arrays of the state the pieces before reached (as a

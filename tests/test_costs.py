@@ -1,5 +1,6 @@
 """The kernel's geometric primitives against their plain NumPy twins and by hand."""
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -221,6 +222,25 @@ def test_prefetching_ahead_changes_no_traversal_sum(sphere_problem):
         assert all(kernel.segment_exclusion(m, p0, p1) == got for m in leads)
         n_nonzero += got > 0
     assert n_nonzero > 50
+
+
+def test_prefetching_changes_no_run():
+    """Both prefetches (the depth map ahead of a traversal, the count map's rows under a moving
+    terminal's spheres) are hints: a short `fast` heart run, coarse map and supply shells
+    included, ends in the same arrays with them and without."""
+    problem = make_problem("tissue=heart", "n_terminals=150", "anneal=fast", "anneal.steps=200000")
+    assert problem.model.prefetch_supply and problem.coarse_model is not None
+    final = []
+    for fields in ({}, {"prefetch_lead": 0.0, "prefetch_supply": False}):
+        p = dataclasses.replace(
+            problem, model=problem.model._replace(**fields), coarse_model=problem.coarse_model._replace(**fields)
+        )
+        state = engine.initial_state(p, seed=2)
+        engine.run_block(p, state, p.total_steps)
+        final.append(engine.state_arrays(state))
+    assert final[0]["counters"][kernel.COUNTER_TERMINAL_ACCEPTED] > 1000
+    for name, value in final[0].items():
+        np.testing.assert_array_equal(value, final[1][name], err_msg=name)
 
 
 def test_supply_spheres_match_brute_force_voxel_for_voxel(sphere_problem):

@@ -221,6 +221,7 @@ def build_problem(config: Any) -> Problem:
         early_reject=True,
         supply_shell_width=kernel.SHELL_WIDTH,
         prefetch_lead=kernel.PREFETCH_LEAD,
+        prefetch_supply=True,
         fixed_inlet_counts=cfg.tissue.inlet_share is not None,
         bifurcation_region=(
             np.zeros((0, 0, 0), dtype=np.uint8)

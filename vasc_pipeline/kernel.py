@@ -90,6 +90,8 @@ Model = namedtuple(
         # 0: none, every supply change row by row; the same sums either way)
         "prefetch_lead",  # float, voxels: how far ahead of a traversal the depth map is prefetched
         # (PREFETCH_LEAD; 0: not at all; the same sums either way)
+        "prefetch_supply",  # bool: prefetch the count map's rows under both spheres before a
+        # terminal move's supply change is computed row by row (the same sums either way)
     ],
 )
 
@@ -844,7 +846,32 @@ def _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, writ
             state.scratch_shell_frame[t, 3],
         )
         return _shell_change(state.supply, model.supply_rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write)
+    if model.prefetch_supply and not write:  # the rows' cache misses in flight together, not one by one
+        _prefetch_sphere(state.supply, model.supply_rho, ox, oy, oz)
+        _prefetch_sphere(state.supply, model.supply_rho, px, py, pz)
     return _sphere_rows(state.supply, model.supply_rho, ox, oy, oz, px, py, pz, write)
+
+
+@jit_norc
+def _prefetch_sphere(supply, rho, cx, cy, cz):
+    """Prefetch the count map's rows under the sphere of radius ``rho`` at (cx, cy, cz) (voxel
+    coordinates): both ends of each row, so all of it while a row's counts fit in 64 bytes."""
+    nz, ny, nx = supply.shape
+    flat = supply.reshape(-1)
+    x_lo = max(math.floor(cx - rho), 0)
+    x_hi = min(math.ceil(cx + rho), nx - 1)
+    if x_lo > x_hi:
+        return
+    rho2 = rho * rho
+    for k in range(max(math.floor(cz - rho), 0), min(math.ceil(cz + rho), nz - 1) + 1):
+        e2 = (k - cz) * (k - cz)
+        if e2 > rho2:
+            continue
+        ry = math.sqrt(rho2 - e2)
+        for j in range(max(math.floor(cy - ry), 0), min(math.ceil(cy + ry), ny - 1) + 1):
+            row = (k * ny + j) * nx
+            prefetch(flat, row + x_lo)
+            prefetch(flat, row + x_hi)
 
 
 @jit_norc
