@@ -287,7 +287,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument(
         "--anneal-steps",
         type=int,
-        help="anneal.steps of the anneal runs (default: the schedule's budget, fast: 6.25e7 (N/1000)^2); "
+        help="anneal.steps of the anneal runs (default: the schedule's budget, fast: 6.25e7 (N/1000)^1.7); "
         "use a separate --out",
     )
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))

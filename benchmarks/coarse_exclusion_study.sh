@@ -15,7 +15,8 @@
 # 2. N = 6000 at 0.37 of the budget (about an hour of one quiet core for the default), seeds
 #    0 and 1;
 # 3. N = 6000 at the full budget, seeds 0 and 1 (about 3 h each beside another job).
-# Since 2026-11-27 (later) these settings are `fast`'s own, so the rows are today's default.
+# From 2026-11-27 (later) to 2026-12-01 these settings were `fast`'s own; the budget law of then
+# (anneal.steps_exponent 2) is spelled out, so that the rows stay reproducible.
 # The old default's rows for the same runs are in benchmarks/results/time_to_quality_rows.jsonl
 # (`fast (2026-11-26, two-part), p_swap=0.3`, the default's settings before the coarse map): its
 # trajectories are deterministic, so only their wall times would change, and wall times taken
@@ -28,7 +29,7 @@ PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2 3)
 T=(python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast)
 COARSE=(--label "fast, coarse_exclusion 2 over 0.3" --override anneal.coarse_exclusion_factor=2
-        --override anneal.coarse_exclusion_phase=0.3)
+        --override anneal.coarse_exclusion_phase=0.3 --override anneal.steps_exponent=2)
 for part in "${PARTS[@]}"; do
   case $part in
     1) "${T[@]}" "${COARSE[@]}" --sizes 500 1000 2000 --seeds 0 1 2 3 ;;

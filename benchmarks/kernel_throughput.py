@@ -97,7 +97,7 @@ def measure(
 ) -> dict:
     base = ["tissue=heart", f"n_terminals={n_terminals}", f"anneal={anneal}", *overrides]
     run_problem, run_steps, problem = trajectory_problem(base, run_budget)
-    total = problem.total_steps  # the schedule's budget: paper 1e9 (N/1000)^2, fast 1e8 (N/1000)^2
+    total = problem.total_steps  # the schedule's budget: paper 1e9 (N/1000)^2, fast 6.25e7 (N/1000)^1.7
     thirds = trajectory_rates(run_problem, run_steps)
     phases = phase_rates(problem, moves, warmup)
     rate = harmonic_mean(thirds)

@@ -133,7 +133,7 @@ PHASE = r"phase must lie in \(0, 1\)"
 @pytest.mark.parametrize(
     "schedule, overrides, field",
     [
-        ("fast", "anneal.coarse_exclusion_phase=null", BOTH),  # fast sets both (2, 0.3) ...
+        ("fast", "anneal.coarse_exclusion_phase=null", BOTH),  # fast sets both (2, 0.4) ...
         ("fast", "anneal.coarse_exclusion_factor=null", BOTH),
         ("fast_v1", "anneal.coarse_exclusion_factor=2", BOTH),  # ... fast_v1 neither
         ("fast_v1", "anneal.coarse_exclusion_phase=0.3", BOTH),

@@ -91,13 +91,14 @@ def test_mb_scan_matches_the_paper():
     assert all(config.scheduled_steps(j.run_config()) == 1_000_000_000 for j in paper)
 
 
-def test_size_scan_steps_scale_with_n_squared():
+def test_size_scan_steps_follow_each_schedules_budget_law():
     cfg = config.compose(["+sweep=size_scan"])
     assert cfg.sweep.n_terminals == [500, 1000, 2000, 4000, 6000] and cfg.tissue.name == "heart"
-    for schedule, at_1000 in (("fast", 6.25e7), ("fast_v1", 1e8), ("paper", 1e9)):
+    # fast: N^1.7 (its N = 6000 budget is where its costs cross fast_v1's); fast_v1 and paper: the paper's N^2.
+    for schedule, at_1000, exponent in (("fast", 6.25e7, 1.7), ("fast_v1", 1e8, 2), ("paper", 1e9, 2)):
         for j in sweep.expand(config.compose(["+sweep=size_scan", f"anneal={schedule}"])):
             n = j.coords["n_terminals"]
-            assert config.scheduled_steps(j.run_config()) == round(at_1000 * (n / 1000) ** 2)
+            assert config.scheduled_steps(j.run_config()) == round(at_1000 * (n / 1000) ** exponent)
     override = sweep.expand(config.compose(["+sweep=size_scan", "anneal.steps=5000"]))
     assert {config.scheduled_steps(j.run_config()) for j in override} == {5000}
 
