@@ -105,7 +105,7 @@ FAST_ONE_EXPONENTIAL = (
     "anneal.supply_phase=0.5",
     "anneal.full_width_phase=0.25",
 )
-# `fast` sums the exclusion term on a coarse map over its first 30 % of moves: tests that call
+# `fast` sums the exclusion term on a coarse map over its first 40 % of moves: tests that call
 # the kernel on a state directly with ``problem.model`` need the true map from the start.
 TRUE_EXCLUSION_MAP = ("anneal.coarse_exclusion_factor=null", "anneal.coarse_exclusion_phase=null")
 # A run of a few seconds: the size the reliability tests use.
