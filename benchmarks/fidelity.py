@@ -66,7 +66,7 @@ def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
     counted = (parent >= 0) & (radius > physics["r_cutoff"])
     out = np.zeros(parent.size)
     for i in np.flatnonzero(counted):
-        out[i] = np.pi * radius[i] ** 2 * costs.exclusion_sum(position[parent[i]], position[i], tissue)
+        out[i] = np.pi * radius[i] ** 2 * costs.exclusion_sum(position[parent[i]], position[i], tissue.exclusion_grid)
     return out * physics["A_o"] / physics["A_wv"]
 
 

@@ -10,8 +10,9 @@ One JSON line per finished run (also appended to ``--out/rows.jsonl``; rows alre
 are not recomputed) with ``n_terminals``, ``anneal``, ``budget`` (times the schedule's
 default), ``steps``, ``seed``, ``wall_seconds`` (all sessions of the run, building the
 problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, voxels),
-``cost_vascular`` (C_v + C_w + A_o/A_wv C_o, W), ``cost_total`` (the annealed C),
-``cavity_share`` and the morphometry against Kassab 1993 (diameter-defined Strahler,
+``cost_vascular`` (C_v + C_w + A_o/A_wv C_o, W) and its parts ``cost_volume``, ``cost_power``,
+``cost_exclusion_weighted`` (W), ``cost_total`` (the annealed C), ``cavity_share``, each inlet's
+share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the morphometry against Kassab 1993 (diameter-defined Strahler,
 element level, orders shifted to 11): ``diameter_error_<artery>`` and
 ``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both),
 the same with the terminal order aligned on Kassab's order of nearest diameter
@@ -139,10 +140,17 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
         "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
         "cost_supply": float(c["supply"]),
         "cost_vascular": float(vascular_exclusion_cost(c, w_o)),
+        "cost_volume": float(c["volume"]),  # C_v, W
+        "cost_power": float(c["power"]),  # C_w, W
+        "cost_exclusion_weighted": float(w_o * c["exclusion"]),  # (A_o/A_wv) C_o, W
         "cost_total": float(c["total"]),
         "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
     }
     tree = store.read_tree()
+    inlet_of = morphometry.inlet_of(tree["parent"])
+    terminals = inlet_of[tree["kind"] == 2]
+    for name, inlet in zip(store.group["tissue"].attrs["inlet_names"], np.flatnonzero(tree["parent"] < 0)):
+        row[f"terminal_share_{name}"] = float(np.mean(terminals == inlet))  # ~0: an abandoned artery
     row.update(morphometry_row(morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
     row["store"] = store_path
     return row

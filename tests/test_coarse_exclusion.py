@@ -15,6 +15,7 @@ from helpers import (
 
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.tissue import ExclusionGrid
 
 COARSE = ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_phase=0.4")
 
@@ -24,7 +25,7 @@ def test_coarse_map_holds_each_blocks_deepest_voxel(shape, factor):
     rs = np.random.default_rng(1)
     distance = np.where(rs.random(shape) < 0.5, np.sqrt(rs.integers(1, 200, shape)), 0.0).astype(np.float32)
     origin, h = np.array([0.1, -0.2, 0.3]), 0.5
-    fields = kernel.coarse_depth_fields(distance, origin, h, factor)
+    fields = kernel.exclusion_fields(ExclusionGrid(distance, origin, h).coarsened(factor))
     fz = 1 if shape[0] == 1 else factor
     got = np.maximum(fields["depth_values"][fields["depth_index"]], 0.0)  # leap markers are -1: outside
     assert got.shape == tuple(-(-s // f) for s, f in zip(shape, (fz, factor, factor)))
@@ -43,9 +44,7 @@ def test_coarse_sums_approximate_the_true_ones_on_the_heart(factor):
     tree within 30 % (the 6th power makes single segments scatter)."""
     problem = make_problem("tissue=heart", "n_terminals=300", "anneal=fast")
     state = engine.initial_state(problem, 0)
-    coarse = problem.model._replace(
-        **kernel.coarse_depth_fields(problem.tissue.distance, problem.tissue.origin, problem.tissue.voxel_size, factor)
-    )
+    coarse = problem.model._replace(**kernel.exclusion_fields(problem.tissue.exclusion_grid.coarsened(factor)))
     pos, k = state.position, problem.model.n_inlets
     sums = np.array(
         [

@@ -72,6 +72,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.ostium_height": None,
     "tissue.base_cut": None,
     "tissue.elongation": None,
+    "tissue.exclusion_voxel_size": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -88,7 +89,14 @@ ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
 # Tissue keys that apply to every tissue; each other key is read only by the tissue builders
 # (vasc_pipeline.tissue.TISSUES) whose signature names it.
-TISSUE_KEYS_OF_EVERY_TISSUE = ("name", "q_required", "inlet_share", "inlet_assignment", "bifurcation_reach")
+TISSUE_KEYS_OF_EVERY_TISSUE = (
+    "name",
+    "q_required",
+    "exclusion_voxel_size",
+    "inlet_share",
+    "inlet_assignment",
+    "bifurcation_reach",
+)
 
 
 class ConfigError(ValueError):
@@ -99,6 +107,9 @@ class ConfigError(ValueError):
 class TissueConfig:
     name: str = "heart"
     voxel_size: Optional[float] = None  # m; None: R_supply / 4 (SPEC section 3)
+    # The grid the exclusion term is summed on, m, fixed whatever N (its D and L are in its
+    # voxels); None: the supply grid above (whose voxel follows N unless voxel_size is set).
+    exclusion_voxel_size: Optional[float] = None
     q_required: Optional[float] = None  # s^-1; None: the N supply spheres fill the tissue
     radius: float = 0.02  # sphere radius, m
     size: list[float] = field(default_factory=lambda: [0.04, 0.04, 0.02])  # box edges [x, y, z], m
@@ -177,7 +188,7 @@ class AnnealConfig:
     # T_start to T_end in log T; None: one exponential from T_start to T_end
     cold_share: Optional[float] = None  # with cold_from: the share of the tree anneal's steps spent in it
     coarse_exclusion_factor: Optional[int] = None  # the exclusion term on a depth map this many times
-    # coarser (kernel.coarse_depth_fields) over the first coarse_exclusion_phase of the tree anneal's steps,
+    # coarser (ExclusionGrid.coarsened) over the first coarse_exclusion_phase of the tree anneal's steps,
     # then on the true one; None: the true map throughout
     coarse_exclusion_phase: Optional[float] = None
     acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
@@ -447,8 +458,9 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive("anneal.step_bifurcation", a.step_bifurcation)
     if not isinstance(a.trace_every, int) or not 1 <= a.trace_every <= MAX_STEPS:
         raise ConfigError(f"anneal.trace_every must be an integer in [1, {MAX_STEPS:.0e}], got {a.trace_every}")
-    if cfg.tissue.voxel_size is not None:
-        _positive("tissue.voxel_size", cfg.tissue.voxel_size)
+    for name in ("voxel_size", "exclusion_voxel_size"):
+        if getattr(cfg.tissue, name) is not None:
+            _positive(f"tissue.{name}", getattr(cfg.tissue, name))
     if cfg.tissue.q_required is not None:
         _positive("tissue.q_required", cfg.tissue.q_required)
     _positive("checkpoint.every_seconds", cfg.checkpoint.every_seconds)

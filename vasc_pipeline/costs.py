@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from .physics import Physics, cost_tables
-from .tissue import Tissue
+from .tissue import ExclusionGrid, Tissue
 from .topology import segment_lengths as _segment_lengths
 from .topology import topological_order
 from .tree import Tree
@@ -88,12 +88,14 @@ def voxel_pieces(u0: np.ndarray, u1: np.ndarray, shape: tuple[int, int, int]) ->
     return idx[inside], pieces[inside]
 
 
-def exclusion_sum(p0: np.ndarray, p1: np.ndarray, tissue: Tissue) -> float:
-    """sum_v (D_v L_v)^6 over the voxels the centre-line p0 -> p1 [m] crosses."""
-    u0 = (np.asarray(p0, dtype=np.float64) - tissue.origin) / tissue.voxel_size
-    u1 = (np.asarray(p1, dtype=np.float64) - tissue.origin) / tissue.voxel_size
-    idx, pieces = voxel_pieces(u0, u1, tissue.shape)
-    depth = tissue.distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64)
+def exclusion_sum(p0: np.ndarray, p1: np.ndarray, grid: ExclusionGrid) -> float:
+    """sum_v (D_v L_v)^6 over the voxels of ``grid`` (a :class:`~vasc_pipeline.tissue.ExclusionGrid`,
+    or anything with its ``distance``, ``origin``, ``voxel_size`` and ``shape``: a ``Tissue``
+    for its own grid) that the centre-line p0 -> p1 [m] crosses, D and L in that grid's voxels."""
+    u0 = (np.asarray(p0, dtype=np.float64) - grid.origin) / grid.voxel_size
+    u1 = (np.asarray(p1, dtype=np.float64) - grid.origin) / grid.voxel_size
+    idx, pieces = voxel_pieces(u0, u1, grid.shape)
+    depth = grid.distance[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.float64)
     return float(np.sum((depth * pieces) ** 6))
 
 
@@ -198,7 +200,7 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
         out["exclusion"] = float(
             sum(
                 tables.exclusion[tree.n_downstream[i]]
-                * exclusion_sum(tree.position[i], tree.position[tree.parent[i]], tissue)
+                * exclusion_sum(tree.position[i], tree.position[tree.parent[i]], tissue.exclusion_grid)
                 for i in seg
                 if tables.exclusion[tree.n_downstream[i]] > 0
             )

@@ -181,9 +181,7 @@ def build_problem(config: Any) -> Problem:
         n_terminals=n,
         tables=cost_tables(physics).array,
         mask=tissue.mask,
-        **kernel.depth_fields(
-            kernel.leap_map(tissue.distance) if terms.exclusion else tissue.distance, tissue.origin, tissue.voxel_size
-        ),
+        **kernel.exclusion_fields(tissue.exclusion_grid),
         origin=tissue.origin,
         voxel_size=float(tissue.voxel_size),
         box_lo=lo,
@@ -232,7 +230,7 @@ def build_problem(config: Any) -> Problem:
     coarse_model, coarse_steps = None, 0
     if a.coarse_exclusion_factor is not None and terms.exclusion:
         coarse_model = model._replace(
-            **kernel.coarse_depth_fields(tissue.distance, tissue.origin, tissue.voxel_size, a.coarse_exclusion_factor)
+            **kernel.exclusion_fields(tissue.exclusion_grid.coarsened(a.coarse_exclusion_factor))
         )
         coarse_steps = pack_steps + int(tree_steps(a.coarse_exclusion_phase))
     return Problem(cfg, physics, tissue, terms, model, total_steps, sites, coarse_model, coarse_steps)

@@ -41,7 +41,7 @@ Model = namedtuple(
         # traversal may leap the voxel's whole block (kernel.leap_map; never a signed distance)
         "depth_origin",
         "depth_voxel_size",  # the depth map's grid: float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, and
-        # edge, m (the tissue's, or a coarser one for a cheaper exclusion term early in a run)
+        # edge, m (the exclusion grid's: the tissue's, one fixed in metres, or either coarsened early in a run)
         "origin",  # float64 (3,) [x, y, z] of voxel [0, 0, 0] centre, m
         "voxel_size",  # float, m
         "box_lo",
@@ -282,26 +282,12 @@ def depth_fields(depth_map, origin, voxel_size):
     }
 
 
-def coarse_depth_fields(distance, origin, voxel_size, factor):
-    """:func:`depth_fields` of a depth map ``factor`` (an integer) times coarser than
-    ``distance`` (the tissue's, voxel [0, 0, 0] centred at ``origin``, edge ``voxel_size``;
-    z is not coarsened in a one-layer grid), for a cheaper exclusion term: a traversal then
-    crosses about 1/factor as many voxels.
-
-    Each coarse voxel holds the largest depth (in the true voxel units) of the voxels it
-    covers, so it is nowhere shallower than the tissue under it (a vessel cannot sink unseen
-    into the tissue below a coarse voxel's centre), times factor^(1/6): a coarse voxel stands
-    for about ``factor`` true ones along a segment, and (factor^(1/6) D L)^6 = factor (D L)^6
-    with L in coarse units, so the coarse sum approximates the true one in its own units and
-    no weight changes (measured in benchmarks/README.md, "A coarse exclusion map early in a run").
-    """
-    f = int(factor)
-    fz = 1 if distance.shape[0] == 1 else f
-    padded = np.pad(distance, [(0, -distance.shape[0] % fz), (0, -distance.shape[1] % f), (0, -distance.shape[2] % f)])
-    nz, ny, nx = padded.shape[0] // fz, padded.shape[1] // f, padded.shape[2] // f
-    coarse = padded.reshape(nz, fz, ny, f, nx, f).max(axis=(1, 3, 5)) * np.float32(f ** (1.0 / 6.0))
-    centre = 0.5 * (np.array([f, f, fz]) - 1) * voxel_size  # of a coarse voxel, from its first fine voxel's
-    return depth_fields(leap_map(coarse), np.asarray(origin, dtype=np.float64) + centre, f * voxel_size)
+def exclusion_fields(grid) -> dict:
+    """:func:`depth_fields` of an exclusion grid (:class:`vasc_pipeline.tissue.ExclusionGrid`:
+    its ``distance``, ``origin``, ``voxel_size``) as the traversal reads it (:func:`leap_map`).
+    The one way a ``Model`` gets its exclusion term's grid: the tissue's own, one fixed in
+    metres (``tissue.exclusion_voxel_size``) or either coarsened (``anneal.coarse_exclusion_*``)."""
+    return depth_fields(leap_map(grid.distance), grid.origin, grid.voxel_size)
 
 
 @jit_norc_inline
@@ -1052,7 +1038,7 @@ def initialise(model, state):
 def recompute_exclusion(model, state):
     """Every segment's exclusion sum and the running exclusion cost from scratch, on the
     model's depth map (0 with the term off): also how a run changes depth maps
-    (:func:`coarse_depth_fields`)."""
+    (:func:`exclusion_fields`)."""
     state.costs[EXCLUSION] = 0.0
     state.compensation[EXCLUSION] = 0.0
     state.seg_exclusion[:] = 0.0

@@ -300,7 +300,9 @@ class RunStore(CheckpointsMixin):
         """``tissue/mask`` and ``tissue/exclusion`` (uint8) and ``tissue/distance`` (float32, voxel units).
 
         ``distance`` is the map the exclusion term used: the distance transform of the
-        exclusion domain (the tissue plus, for the heart, the ventricular cavities). Dims (z, y, x).
+        exclusion domain (the tissue plus, for the heart, the ventricular cavities), on the
+        exclusion grid (attrs ``voxel_size``, ``origin``). Dims (z, y, x) on the tissue's grid; on
+        a grid of its own (``tissue.exclusion_voxel_size``) (z_exclusion, y_exclusion, x_exclusion).
         """
         attrs = {
             "voxel_size": float(tissue.voxel_size),
@@ -310,30 +312,42 @@ class RunStore(CheckpointsMixin):
             "ndim": int(tissue.ndim),
             "inlet_names": list(tissue.inlet_names),
         }
+        grid = tissue.exclusion_grid
+        own_grid = grid.distance is not tissue.distance
+        attrs["exclusion_voxel_size"] = float(grid.voxel_size)
+        attrs["exclusion_origin"] = [float(v) for v in grid.origin]
         group = self.group.require_group("tissue")
         group.update_attributes(attrs)
+        zyx = ["z", "y", "x"]
         specs = (
-            ("mask", tissue.mask, "uint8", {**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"}),
+            ("mask", tissue.mask, "uint8", zyx, {**attrs, "long_name": "tissue mask (1 = tissue)", "units": "1"}),
             (
                 "exclusion",
                 tissue.exclusion,
                 "uint8",
+                zyx,
                 {"long_name": "exclusion domain of large vessels (1 = excluded: tissue and cavities)", "units": "1"},
             ),
             (
                 "distance",
-                tissue.distance,
+                grid.distance,
                 "float32",
-                {"long_name": "distance to the nearest voxel outside the exclusion domain", "units": "voxel"},
+                [f"{d}_exclusion" for d in zyx] if own_grid else zyx,
+                {
+                    "long_name": "distance to the nearest voxel outside the exclusion domain",
+                    "units": "voxel",
+                    "voxel_size": float(grid.voxel_size),
+                    "origin": [float(v) for v in grid.origin],
+                },
             ),
         )
-        for name, data, dtype, attributes in specs:
+        for name, data, dtype, dims, attributes in specs:
             arr = group.create_array(
                 name,
                 shape=data.shape,
                 dtype=dtype,
                 chunks=data.shape,
-                dimension_names=["z", "y", "x"],
+                dimension_names=dims,
                 overwrite=True,
                 attributes=attributes,
             )

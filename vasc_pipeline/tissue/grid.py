@@ -30,6 +30,9 @@ from ..physics import supply_radius
 __all__ = [
     "Tissue",
     "TissueError",
+    "ExclusionGrid",
+    "exclusion_distance",
+    "resampled_exclusion_grid",
     "voxelize",
     "default_voxel_size",
     "check_grid_memory",
@@ -71,6 +74,69 @@ class TissueError(ValueError):
     """A tissue configuration that cannot be built; the message names the field."""
 
 
+@dataclass(frozen=True, eq=False)
+class ExclusionGrid:
+    """The voxel grid the exclusion term C_o is summed on.
+
+    By default the tissue's own grid; with ``tissue.exclusion_voxel_size`` a grid of its
+    own, fixed in metres, so that the exclusion of a given tree does not change with N
+    (on the supply grid, whose voxel follows N, it grows as voxel^-7). The coarse map of
+    ``anneal.coarse_exclusion_*`` is this grid :meth:`coarsened`.
+
+    Attributes
+    ----------
+    distance : float32 ndarray (nz, ny, nx)
+        Depth D of each voxel of the exclusion domain, in this grid's voxel units (0 outside).
+    origin : float64 ndarray (3,)
+        [x, y, z] of the centre of voxel [0, 0, 0] [m].
+    voxel_size : float
+        Edge of the isotropic voxels [m].
+    """
+
+    distance: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.distance.shape
+
+    def coarsened(self, factor: int) -> ExclusionGrid:
+        """This grid ``factor`` (an integer) times coarser (z is not coarsened in a one-layer
+        grid), for a cheaper exclusion term: a traversal then crosses about 1/factor as many voxels.
+
+        Each coarse voxel holds the largest depth (in this grid's voxel units) of the voxels it
+        covers, so it is nowhere shallower than the tissue under it (a vessel cannot sink unseen
+        into the tissue below a coarse voxel's centre), times factor^(1/6): a coarse voxel stands
+        for about ``factor`` fine ones along a segment, and (factor^(1/6) D L)^6 = factor (D L)^6
+        with L in coarse units, so the coarse sum approximates the fine one in its units and no
+        weight changes.
+        """
+        f = int(factor)
+        distance = self.distance
+        fz = 1 if distance.shape[0] == 1 else f
+        padded = np.pad(
+            distance, [(0, -distance.shape[0] % fz), (0, -distance.shape[1] % f), (0, -distance.shape[2] % f)]
+        )
+        nz, ny, nx = padded.shape[0] // fz, padded.shape[1] // f, padded.shape[2] // f
+        coarse = padded.reshape(nz, fz, ny, f, nx, f).max(axis=(1, 3, 5)) * np.float32(f ** (1.0 / 6.0))
+        centre = 0.5 * (np.array([f, f, fz]) - 1) * self.voxel_size  # of a coarse voxel, from its first fine voxel's
+        return ExclusionGrid(coarse, np.asarray(self.origin, dtype=np.float64) + centre, f * self.voxel_size)
+
+
+def exclusion_distance(exclusion: np.ndarray, open_boundary: np.ndarray | None, ndim: int) -> np.ndarray:
+    """float32 (nz, ny, nx): each voxel's distance to the nearest voxel outside the exclusion
+    domain (uint8 ``exclusion``), in voxel units, 0 outside it. The grid's edge counts as
+    outside, except where ``open_boundary`` (voxels the map looks through) reaches it."""
+    pad = 1 if ndim == 3 else ((0, 0), (1, 1), (1, 1))
+    feature = np.pad(exclusion, pad).astype(bool)
+    if open_boundary is not None:
+        feature |= np.pad(np.asarray(open_boundary, dtype=bool), pad, mode="edge")
+    dist = ndimage.distance_transform_edt(feature)
+    inner = dist[1:-1, 1:-1, 1:-1] if ndim == 3 else dist[:, 1:-1, 1:-1]
+    return np.ascontiguousarray(inner * exclusion, dtype=np.float32)
+
+
 @dataclass
 class Tissue:
     """A voxelised tissue domain.
@@ -101,6 +167,9 @@ class Tissue:
     distance : float32 ndarray (nz, ny, nx)
         Distance of each voxel of the exclusion domain to the nearest voxel of its surface
         (outside it and not open), in voxel units (0 outside the domain).
+    exclusion_grid : ExclusionGrid
+        The grid the exclusion term is summed on: this grid's ``distance`` unless the builder
+        (``tissue.exclusion_voxel_size``, :func:`vasc_pipeline.tissue.build_tissue`) set another.
     """
 
     name: str
@@ -113,6 +182,7 @@ class Tissue:
     exclusion: np.ndarray | None = field(default=None, repr=False)
     open_boundary: np.ndarray | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
+    exclusion_grid: ExclusionGrid = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.mask = np.ascontiguousarray(self.mask, dtype=np.uint8)
@@ -149,21 +219,15 @@ class Tissue:
                     f"mask {self.mask.shape}; they must be the same grid"
                 )
             self.exclusion = (self.mask | (extra != 0)).astype(np.uint8)
-        # Distance to the nearest voxel outside the exclusion domain. The builders pad the
-        # grid, but a user's mask may touch its edge: pad here so the grid edge counts as
-        # outside, except where an open boundary reaches it (it continues past the edge).
-        pad = 1 if self.ndim == 3 else ((0, 0), (1, 1), (1, 1))
-        feature = np.pad(self.exclusion, pad).astype(bool)
-        if self.open_boundary is not None:
-            if self.open_boundary.shape != self.mask.shape:
-                raise TissueError(
-                    f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
-                    f"the tissue mask {self.mask.shape}; they must be the same grid"
-                )
-            feature |= np.pad(np.asarray(self.open_boundary, dtype=bool), pad, mode="edge")
-        dist = ndimage.distance_transform_edt(feature)
-        inner = dist[1:-1, 1:-1, 1:-1] if self.ndim == 3 else dist[:, 1:-1, 1:-1]
-        self.distance = np.ascontiguousarray(inner * self.exclusion, dtype=np.float32)
+        if self.open_boundary is not None and self.open_boundary.shape != self.mask.shape:
+            raise TissueError(
+                f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
+                f"the tissue mask {self.mask.shape}; they must be the same grid"
+            )
+        # The builders pad the grid, but a user's mask may touch its edge: the distance map
+        # pads it so the grid edge counts as outside (but where an open boundary continues).
+        self.distance = exclusion_distance(self.exclusion, self.open_boundary, self.ndim)
+        self.exclusion_grid = ExclusionGrid(self.distance, self.origin, float(self.voxel_size))
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -276,3 +340,25 @@ def default_voxel_size(
     so a given ``tissue.q_required`` sizes the voxels too.
     """
     return supply_radius(n_terminals, measure, ndim, q_required, total_flow) / VOXELS_PER_SUPPLY_RADIUS
+
+
+def resampled_exclusion_grid(tissue: Tissue, voxel_size: float) -> ExclusionGrid:
+    """The exclusion domain of ``tissue`` (and its open boundary) sampled at the centres of a
+    grid of ``voxel_size`` [m] over the same box (nearest voxel), with its distance map: the
+    exclusion grid of a tissue that only exists as voxels (a user's mask)."""
+    lo, hi = tissue.bounds
+    counts = np.maximum(np.ceil((hi - lo) / voxel_size - 1e-9), 1).astype(int)
+    origin = lo + 0.5 * voxel_size
+    if tissue.ndim == 2:
+        counts[2], origin[2] = 1, tissue.origin[2]
+    check_grid_memory(counts, voxel_size)
+    axes = [origin[a] + voxel_size * np.arange(counts[a]) for a in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    idx = np.clip(tissue.voxel_index(np.stack([x, y, z], axis=-1)), 0, np.array(tissue.shape) - 1)
+
+    def sample(grid: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(grid[idx[..., 0], idx[..., 1], idx[..., 2]])
+
+    exclusion = sample(tissue.exclusion).astype(np.uint8)
+    open_boundary = None if tissue.open_boundary is None else sample(np.asarray(tissue.open_boundary, dtype=bool))
+    return ExclusionGrid(exclusion_distance(exclusion, open_boundary, tissue.ndim), origin, float(voxel_size))
