@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # fast's flatter budget law (anneal.steps_exponent 1.7) with the coarse exclusion map over the
-# first 40 % of the moves (benchmarks/README.md, "A flatter budget law becomes fast's"), resumable:
+# first 40 % of the moves (docs/findings/time-to-quality.md, "A flatter budget law becomes fast's"), resumable:
 # every run is a checkpointed pipeline job, so rerunning this script after an interruption
 # continues where it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
 #

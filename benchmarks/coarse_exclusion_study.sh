@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The coarse exclusion map early in a run (anneal.coarse_exclusion_*; benchmarks/README.md,
+# The coarse exclusion map early in a run (anneal.coarse_exclusion_*; docs/findings/coarse-exclusion.md,
 # "A coarse exclusion map early in a run") against the default it replaced, resumable: every run is
 # a checkpointed pipeline job, so rerunning this script after an interruption continues where
 # it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
@@ -21,7 +21,7 @@
 # (`fast (2026-11-26, two-part), p_swap=0.3`, the default's settings before the coarse map): its
 # trajectories are deterministic, so only their wall times would change, and wall times taken
 # one after the other on a shared machine are no paired comparison (the coarse part's speed is
-# measured in benchmarks/README.md). Runs one job at a time (--workers 1).
+# measured in docs/findings/coarse-exclusion.md). Runs one job at a time (--workers 1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/coarse_exclusion}

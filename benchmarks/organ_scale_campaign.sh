@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The organ-scale and fidelity measurements (issues 12 and 13), resumable: every run is a
+# The organ-scale and fidelity measurements (docs/findings/performance.md and fidelity.md), resumable: every run is a
 # checkpointed pipeline job, so rerunning this script after an interruption continues where
 # it stopped (even inside a 5-hour N = 6000 run). Rows go to OUT/rows.jsonl.
 #
