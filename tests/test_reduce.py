@@ -244,9 +244,12 @@ def test_figures_exist_and_are_not_blank(swept):
         _png_is_a_real_figure(p)
 
 
-def test_best_trees_are_exported_as_vtp_and_csv(swept):
+def test_best_trees_are_exported_as_vtp_csv_and_0d_json(swept):
     out, _, result, _ = swept
-    assert len(result.trees) == 2 * len(result.best)
+    assert len(result.trees) == 3 * len(result.best)
+    assert {p.name for p in result.trees} == {
+        f"{r.run_id}{suffix}" for r in result.best.values() for suffix in (".vtp", ".csv", ".0d.json")
+    }
     for run in result.best.values():
         tree = store.RunStore.open(run.path, mode="r").read_tree()
         n_nodes, n_inlets = tree["parent"].size, int((tree["parent"] < 0).sum())

@@ -189,10 +189,11 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
     """Delete the tree exports and tree figures of runs that are no longer their cell's best.
 
     A cell's best tree changes when a better seed finishes; the earlier reduction's
-    ``trees/<run_id>.{vtp,csv}`` and ``figures/tree_<run_id>.png`` would otherwise stay
+    ``trees/<run_id>.{vtp,csv,0d.json}`` and ``figures/tree_<run_id>.png`` would otherwise stay
     beside the new ones. Only files named after a store in ``runs/`` are touched.
     """
     from .export import export_paths
+    from .zerod import zero_d_path
 
     out = Path(output_dir)
     current = {r.run_id for r in best.values()}
@@ -202,7 +203,8 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
         if run_id in current:
             continue
         # the tree figure's name is make_figures' (vasc_pipeline.figures, not imported here: matplotlib)
-        for path in (*export_paths(out / "trees", run_id), out / "figures" / f"tree_{run_id}.png"):
+        stale = (*export_paths(out / "trees", run_id), zero_d_path(out / "trees", run_id))
+        for path in (*stale, out / "figures" / f"tree_{run_id}.png"):
             if path.is_file():
                 path.unlink()
                 removed.append(path)
@@ -221,7 +223,8 @@ def reduce(
     figures : bool
         Write the PNG figures into ``<output_dir>/figures/``.
     exports : bool
-        Write ``<output_dir>/trees/<run_id>.vtp`` and ``.csv`` for the best tree of every cell.
+        Write ``<output_dir>/trees/<run_id>.vtp``, ``.csv`` and ``.0d.json`` (svZeroDSolver's
+        input, :mod:`vasc_pipeline.zerod`) for the best tree of every cell.
     stream : text stream, optional
         Where the comparison table and the list of outputs are printed (default stdout).
 
@@ -258,11 +261,13 @@ def reduce(
     stream.write(format_comparison(summary) + "\n")
     result.removed = remove_superseded_outputs(out, best)
     if exports:
+        from . import zerod
         from .export import export_run
 
         try:
             for r in best.values():
                 result.trees.extend(export_run(r.path, out / "trees"))
+                result.trees.append(zerod.export_run(r.path, out / "trees"))  # the svZeroDSolver network
         except Exception as exc:  # an export problem must not hide the summary already written
             result.errors["exports"] = f"{type(exc).__name__}: {exc}"
     if figures:
@@ -278,7 +283,9 @@ def reduce(
         f"  comparison: {csv}, {csv_summary}",
     ]
     if result.trees:
-        lines.append(f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv)")
+        lines.append(
+            f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv, .0d.json for svZeroDSolver)"
+        )
     if result.figures:
         lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")
     if result.removed:
