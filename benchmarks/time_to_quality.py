@@ -14,8 +14,8 @@ problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, vo
 ``cost_exclusion_weighted`` (W), ``cost_total`` (the annealed C), ``cavity_share``, each inlet's
 share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the
 morphometry against Kassab 1993 (diameter-defined Strahler, element level, orders shifted to
-11): ``diameter_error_<artery>`` and ``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both),
-the same with the terminal order aligned on Kassab's order of nearest diameter
+11): ``diameter_error_<artery>`` and ``length_error_<artery>`` (mean |log10 model/Kassab|
+over the orders present in both), the same with the terminal order aligned on Kassab's order of nearest diameter
 (``..._terminal_aligned_<artery>``, shift in ``terminal_aligned_shift``), ``n_orders`` and
 ``orders`` (per order: elements, segments per element, mean diameter [um], length [mm]).
 Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
