@@ -13,7 +13,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any, Optional
 
@@ -23,6 +23,7 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.pipeline_config (re-e
     "ConfigError",
     "KEYS_ADDED_LATER",
     "TissueConfig",
+    "LabelsConfig",
     "PhysicsConfig",
     "AnnealConfig",
     "TerminalsConfig",
@@ -73,6 +74,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.base_cut": None,
     "tissue.elongation": None,
     "tissue.exclusion_voxel_size": None,
+    "tissue.labels": {"supply": None, "exclusion": None, "open": None},
+    "tissue.inlets_path": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -104,6 +107,16 @@ class ConfigError(ValueError):
 
 
 @dataclass
+class LabelsConfig:
+    """tissue=mask: which label values of the mask (a NIfTI or NRRD label map, or any integer
+    array) play which part; all None: nonzero = tissue."""
+
+    supply: Optional[list[int]] = None  # the tissue (myocardium); None: every nonzero label not named below
+    exclusion: Optional[list[int]] = None  # not supplied, but not to be crossed by large vessels (cavities)
+    open: Optional[list[int]] = None  # outside, looked through by the exclusion map (the space above a base cut)
+
+
+@dataclass
 class TissueConfig:
     name: str = "heart"
     voxel_size: Optional[float] = None  # m; None: R_supply / 4 (SPEC section 3)
@@ -128,6 +141,8 @@ class TissueConfig:
     inlets: Optional[list[list[Any]]] = None  # mask: inlet positions [x, y, z], m (numbers; checked by validate)
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
     exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
+    labels: LabelsConfig = field(default_factory=LabelsConfig)  # mask: label values by role
+    inlets_path: Optional[str] = None  # mask: inlets from a JSON {name: [x, y, z]} or CSV x, y, z[, name] (m)
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
@@ -357,6 +372,7 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "places them at their optimum: leave it unset (null) there"
             )
     _check_tissue_keys(cfg.tissue)
+    _check_labels(cfg.tissue.labels)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
@@ -477,6 +493,23 @@ def validate(cfg: RunConfig) -> RunConfig:
     return cfg
 
 
+def _check_labels(labels: LabelsConfig) -> None:
+    """Each of tissue.labels.* null or a non-empty list of integers >= 0, no label in two roles."""
+    seen: dict[int, str] = {}
+    for role in ("supply", "exclusion", "open"):
+        values = getattr(labels, role)
+        if values is None:
+            continue
+        if not values or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in values):
+            raise ConfigError(
+                f"tissue.labels.{role} must be a non-empty list of integer label values >= 0, or null, got {values!r}"
+            )
+        for v in values:
+            if v in seen:
+                raise ConfigError(f"tissue.labels: label {v} is both {seen[v]} and {role}; give each label one role")
+            seen[v] = role
+
+
 def _check_tissue_keys(tissue: TissueConfig) -> None:
     """A tissue key the chosen tissue does not read (``tissue.mass_g`` with ``tissue=sphere``)
     must keep its default: set, it would change nothing but the run's identity."""
@@ -492,7 +525,7 @@ def _check_tissue_keys(tissue: TissueConfig) -> None:
             readers = " and ".join(f"tissue={name}" for name, keys in read_by.items() if key in keys)
             raise ConfigError(
                 f"tissue.{key} is read by {readers} only; tissue={tissue.name} ignores it: leave it at its "
-                f"default ({json.dumps(default)})"
+                f"default ({json.dumps(asdict(default) if is_dataclass(default) else default)})"
             )
 
 

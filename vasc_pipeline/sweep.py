@@ -21,6 +21,7 @@ from typing import Any
 
 from .config import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
 from .store import run_path
+from .tissue.shapes import mask_geometry
 
 __all__ = ["Job", "expand", "run_id", "cell_id", "job_config", "stored_config"]
 
@@ -116,6 +117,15 @@ def _axis(name: str, values: Any, default: Any, kind: type, check, accepted: str
     return out
 
 
+def _mask_geometry(tissue) -> dict:
+    """A mask's voxel size and origin as its run takes them (a label map's header, a Zarr array's
+    attrs), so that the run's config records them; other tissues keep theirs."""
+    if tissue.name != "mask" or not tissue.path:
+        return {}
+    voxel_size, origin = mask_geometry(tissue.path, tissue.array, tissue.voxel_size, tissue.origin)
+    return {"voxel_size": voxel_size, "origin": origin}
+
+
 def _absolute(path: str | None) -> str | None:
     return None if path is None or "://" in path else str(Path(path).expanduser().resolve())
 
@@ -130,7 +140,13 @@ def job_config(cfg: RunConfig, n_terminals: int, m_b: float, seed: int, steps: i
         output_dir=str(Path(cfg.output_dir).expanduser().resolve()),
         physics=replace(cfg.physics, m_b=float(m_b)),
         anneal=anneal,
-        tissue=replace(cfg.tissue, path=_absolute(cfg.tissue.path)),
+        tissue=replace(
+            cfg.tissue,
+            **_mask_geometry(cfg.tissue),
+            path=_absolute(cfg.tissue.path),
+            exclusion_path=_absolute(cfg.tissue.exclusion_path),
+            inlets_path=_absolute(cfg.tissue.inlets_path),
+        ),
         terminals=replace(cfg.terminals, path=_absolute(cfg.terminals.path)),
         sweep=None,
     )

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
+from . import images
 from .grid import Tissue, TissueError, default_voxel_size, voxelize
 
-__all__ = ["sphere", "box", "plane2d", "mask"]
+__all__ = ["sphere", "box", "plane2d", "mask", "mask_geometry"]
 
 
 def sphere(
@@ -70,11 +71,38 @@ def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None
     return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
 
 
+def mask_geometry(path: str | None, array: str | None = None, voxel_size=None, origin=None, stored=None) -> tuple:
+    """(``tissue.voxel_size``, ``tissue.origin``) as a mask run takes them: the config's where set,
+    else a label map's header or a Zarr array's attrs (``stored``, when already read); the origin
+    at last [0, 0, 0], the voxel size None (the builder then refuses it). Reads headers and attrs
+    only; a file that cannot be read keeps the config's values (the builder says why)."""
+    if stored is None:
+        stored = {}
+        try:
+            p = Path(path).expanduser()
+            if images.is_label_map(p):
+                h, o = images.label_map_geometry(p)
+                stored = {"voxel_size": h, "origin": o.tolist()}
+            elif p.suffix != ".npy":
+                import zarr
+
+                node = zarr.open(str(p), mode="r")
+                stored = dict((node[array] if array else node).attrs)
+        except Exception:  # noqa: BLE001 (reported by the builder, which reads the data)
+            pass
+    h = voxel_size if voxel_size is not None else stored.get("voxel_size")
+    o = origin if origin is not None else stored.get("origin", [0.0, 0.0, 0.0])
+    return h, o
+
+
 def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarray, dict]:
     """(data, attrs) of a ``.npy`` file or a Zarr array; errors name ``tissue.<field>``."""
     p = Path(path).expanduser()
     if not p.exists():
         raise TissueError(f"tissue.{field}: mask file {str(p)!r} does not exist")
+    if images.is_label_map(p):  # NIfTI or NRRD: spacing and origin from the header
+        data, h, origin = images.read_label_map(p, field)
+        return data, {"voxel_size": h, "origin": origin.tolist()}
     attrs: dict = {}
     try:
         if p.suffix == ".npy":
@@ -125,6 +153,8 @@ def mask(
     array: str | None = None,
     exclusion_path: str | None = None,
     exclusion_array: str | None = None,
+    labels: dict | None = None,
+    inlets_path: str | None = None,
     **_,
 ) -> Tissue:
     """A user's voxel mask from a ``.npy`` file or a Zarr array (medical-image segmentations).
@@ -136,6 +166,14 @@ def mask(
     ``inlets`` is a list of [x, y, z] positions [m]. ``exclusion_path`` (and
     ``exclusion_array``), optional: a second mask on the same grid whose nonzero voxels
     large vessels must not cross either, although they need no supply (cavities, bone).
+
+    ``path`` may also be a NIfTI (``.nii``, ``.nii.gz``) or NRRD label map
+    (:mod:`vasc_pipeline.tissue.images`): voxel size and origin then come from its header.
+    ``labels`` (``tissue.labels``) reads a label map by value: ``supply`` the tissue's labels
+    (default: every nonzero label not named below), ``exclusion`` those large vessels must not
+    cross although they need no supply (cavities), ``open`` those the exclusion map looks through
+    (the space above a heart's base cut). ``inlets_path``: the inlets from a JSON or CSV file
+    (:func:`~vasc_pipeline.tissue.images.read_inlets`), instead of ``inlets``.
     """
     if not path:
         raise TissueError("tissue.path is required for tissue=mask: a .npy file or a Zarr array")
@@ -143,17 +181,49 @@ def mask(
     if data.size == 0 or not np.any(data):
         raise TissueError(f"tissue.path: the mask {path!r} is empty (no nonzero voxel)")
     ndim = data.ndim
-    h = voxel_size if voxel_size is not None else attrs.get("voxel_size")
+    if images.is_label_map(path):  # the header places the image: a config that says otherwise is a mistake
+        for key, given, stored in (
+            ("voxel_size", voxel_size, attrs["voxel_size"]),
+            ("origin", origin, attrs["origin"]),
+        ):
+            if given is not None and not np.allclose(given, stored, rtol=1e-9, atol=1e-12):
+                raise TissueError(
+                    f"tissue.{key}={given} contradicts the header of {path!r} ({stored}); leave it unset (null)"
+                )
+    h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
     if h is None or not float(h) > 0:
         raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
-    org = origin if origin is not None else attrs.get("origin", [0.0, 0.0, 0.0])
     org = np.asarray(org, dtype=np.float64)
     if org.shape != (3,):
         raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
+    names: tuple[str, ...] = ()
+    if inlets_path:
+        if inlets is not None:
+            raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
+        inlets, names = images.read_inlets(inlets_path)
     if inlets is None:
-        raise TissueError("tissue.inlets is required for tissue=mask: a list of [x, y, z] positions in metres")
+        raise TissueError(
+            "tissue.inlets (a list of [x, y, z] positions in metres) or tissue.inlets_path is required for tissue=mask"
+        )
+    by_label = {k: v for k, v in (labels or {}).items() if v is not None}
     grid = (np.asarray(data) != 0).astype(np.uint8)
-    extra = None
+    extra = open_boundary = None
+    if by_label:
+        if exclusion_path:
+            raise TissueError(
+                "tissue.labels.exclusion and tissue.exclusion_path both give the exclusion domain: set one"
+            )
+        named = np.isin(data, [v for k in ("exclusion", "open") for v in by_label.get(k, [])])
+        grid = (np.isin(data, by_label["supply"]) if "supply" in by_label else (data != 0) & ~named).astype(np.uint8)
+        if not grid.any():
+            raise TissueError(
+                f"tissue.labels.supply: no voxel of {path!r} holds the labels {by_label.get('supply', 'nonzero')} "
+                f"(its labels: {np.unique(data).tolist()[:20]})"
+            )
+        if "exclusion" in by_label:
+            extra = np.isin(data, by_label["exclusion"]).astype(np.uint8)
+        if "open" in by_label:
+            open_boundary = np.isin(data, by_label["open"])
     if exclusion_path:
         extra, _ = _load_mask_array(exclusion_path, exclusion_array, "exclusion_path")
         if extra.shape != data.shape:
@@ -165,4 +235,8 @@ def mask(
     if ndim == 2:
         grid = grid[None]
         extra = None if extra is None else extra[None]
-    return Tissue("mask", grid, float(h), org, inlets, ndim=ndim, exclusion=extra)
+    if ndim == 2 and open_boundary is not None:
+        open_boundary = open_boundary[None]
+    return Tissue(
+        "mask", grid, float(h), org, inlets, ndim=ndim, inlet_names=names, exclusion=extra, open_boundary=open_boundary
+    )
