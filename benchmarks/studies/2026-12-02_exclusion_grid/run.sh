@@ -6,8 +6,8 @@
 #   b'  ... fixed at the N = 6000 voxel (0.504 mm), so N = 6000 is run a's, bit for bit
 #   c   both grids fixed at the N = 6000 voxel (tissue.voxel_size), so N = 6000 is again a's
 # Resumable: every run is a checkpointed pipeline job; rerun the same command to continue (even
-# inside an N = 6000 run). Rows go to OUT/rows.jsonl and are copied beside this script after
-# each part (rows.jsonl); summarise.py prints the tables of the notes (README.md here).
+# inside an N = 6000 run). Rows go to OUT/rows.jsonl and are merged into rows.jsonl beside this
+# script after each part; summarise.py prints the tables of the notes (README.md here).
 #
 #     bash benchmarks/studies/2026-12-02_exclusion_grid/run.sh [OUT [PART ...]]
 #
@@ -42,5 +42,7 @@ for part in "${PARTS[@]}"; do
     sizes=(--sizes 4000 --seeds 0 1)  # N = 6000 of b' and c is a's run: the same grids, bit for bit
   fi
   python benchmarks/time_to_quality.py --out "$OUT" --workers 1 "${FAST[@]}" "${grid[@]}" "${sizes[@]}"
-  cp "$OUT/rows.jsonl" "$here/rows.jsonl"
+  # Every OUT this study has used, into the one rows file (parts may run in two OUTs side by side).
+  cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
+  sort -u -o "$here/rows.jsonl" "$here/rows.jsonl"
 done
