@@ -283,6 +283,8 @@ class RunStore(CheckpointsMixin):
         if config_hash(requested) == config_hash(self.group.attrs["config"]):
             return
         diff = config_differences(self.group.attrs["config"], requested)
+        if not diff:  # a store from before the input digests (identity.INPUTS): compared without them
+            return
         raise ConfigError(
             f"run {self.run_id!r} in {str(self.path)!r} was started with a different configuration, and runs "
             f"are never mixed: {'; '.join(diff) or 'config hash differs'}. Restore those settings to resume it, "

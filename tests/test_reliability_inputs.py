@@ -1,0 +1,117 @@
+"""Reliability, second pass: a run's input files are part of its identity (by content), and the
+inputs a user types are accepted or refused by name. Tiny problems, mostly in this process."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import TINY_RUN
+
+from vasc_pipeline import config, engine, orchestrate, planning, store, sweep
+from vasc_pipeline.config import ConfigError
+from vasc_pipeline.identity import INPUTS
+
+H = 1e-3  # m
+
+
+def ball(n: int, r: float) -> np.ndarray:
+    z, y, x = np.indices((n, n, n)) - (n - 1) / 2
+    return (x**2 + y**2 + z**2 <= r**2).astype(np.uint8)
+
+
+def mask_overrides(path: Path, out: Path, *extra: str) -> list[str]:
+    data = np.load(path)
+    z, y, x = np.argwhere(data)[np.argmax(np.argwhere(data)[:, 0])]
+    inlet = [float(H * x), float(H * y), float(H * z)]
+    return [
+        "tissue=mask",
+        f"tissue.path={path}",
+        f"tissue.voxel_size={H!r}",
+        "tissue.origin=[0.0,0.0,0.0]",
+        f"tissue.inlets=[[{inlet[0]!r},{inlet[1]!r},{inlet[2]!r}]]",
+        "n_terminals=8",
+        "anneal.steps=2000",
+        "anneal.trace_every=500",
+        f"output_dir={out}",
+        *extra,
+    ]
+
+
+def plan_and_create(overrides: list[str]) -> planning.Plan:
+    """What a sweep does before dispatch: plan, check the stores on disk, create the new ones."""
+    p = planning.plan(config.compose(overrides))
+    with orchestrate.output_dir_lock(p.output_dir):
+        planning.inspect_stores(p)
+        planning.create_stores(p)
+    return p
+
+
+# -- 1. an input file edited in place is another input ---------------------------------------
+
+
+def test_mask_overwritten_in_place_is_refused_by_name(tmp_path):
+    mask = tmp_path / "tissue.npy"
+    np.save(mask, ball(16, 7.0))
+    out = tmp_path / "out"
+    (j,) = plan_and_create(mask_overrides(mask, out, "seed=0")).jobs
+    stored = store.RunStore.open(j.store, mode="r").attrs["config"]
+    assert stored[INPUTS]["tissue.path"].startswith("sha256:")
+    np.save(mask, ball(16, 5.0))  # same path, another tissue
+    # a new seed beside the stored one: the one-configuration rule compares the content
+    with pytest.raises(ConfigError, match=r"tissue\.path: the content of .*tissue\.npy.* changed in place"):
+        plan_and_create(mask_overrides(mask, out, "+sweep=single", "sweep.seeds=[0,1]"))
+    assert not (out / "runs" / f"{j.run_id[:-1]}1.zarr").exists()  # nothing was created
+    # the stored run itself, resumed: refused too
+    with pytest.raises(ConfigError, match=r"tissue\.path: the content of"):
+        plan_and_create(mask_overrides(mask, out, "seed=0"))
+    np.save(mask, ball(16, 7.0))  # the original content again: accepted
+    plan_and_create(mask_overrides(mask, out, "+sweep=single", "sweep.seeds=[0,1]"))
+
+
+def test_exclusion_mask_and_terminals_csv_are_part_of_the_identity(tmp_path):
+    mask, excl = tmp_path / "tissue.npy", tmp_path / "excl.npy"
+    data = ball(16, 7.0)
+    np.save(mask, data)
+    np.save(excl, np.zeros_like(data))
+    base = mask_overrides(mask, tmp_path / "a", f"tissue.exclusion_path={excl}")
+    problem = engine.build_problem(config.compose(base))
+    sites = engine.initial_state(problem, seed=3).position[1:9]
+    csv = tmp_path / "sites.csv"
+    np.savetxt(csv, sites, delimiter=",", header="x,y,z", comments="")
+    overrides = [*base, f"terminals.path={csv}"]
+    (j,) = plan_and_create(overrides).jobs
+    assert set(store.RunStore.open(j.store, mode="r").attrs["config"][INPUTS]) == {
+        "tissue.path",
+        "tissue.exclusion_path",
+        "terminals.path",
+    }
+    np.savetxt(csv, sites[::-1], delimiter=",", header="x,y,z", comments="")
+    with pytest.raises(ConfigError, match=r"terminals\.path: the content of .*sites\.csv"):
+        plan_and_create([*overrides, "+sweep=single", "sweep.seeds=[0,1]"])
+    np.savetxt(csv, sites, delimiter=",", header="x,y,z", comments="")
+    exclusion = np.zeros_like(data)
+    exclusion[0, 0, 0] = 1
+    np.save(excl, exclusion)
+    with pytest.raises(ConfigError, match=r"tissue\.exclusion_path: the content of .*excl\.npy"):
+        plan_and_create(overrides)
+
+
+def test_a_store_written_before_the_input_digests_keeps_resuming(tmp_path):
+    mask = tmp_path / "tissue.npy"
+    np.save(mask, ball(16, 7.0))
+    out = tmp_path / "out"
+    (j,) = plan_and_create(mask_overrides(mask, out)).jobs
+    s = store.RunStore.open(j.store)
+    legacy = {k: v for k, v in s.attrs["config"].items() if k != INPUTS}  # as older versions wrote it
+    s._set_attrs(config=legacy, config_hash=store.config_hash(legacy))
+    p = plan_and_create(mask_overrides(mask, out, "+sweep=single", "sweep.seeds=[0,1]"))
+    assert p.started == {j.run_id: 0}
+
+
+def test_runs_without_input_files_keep_their_identity():
+    (j,) = sweep.expand(config.compose(TINY_RUN))
+    assert INPUTS not in j.config  # the hash of every earlier store of the built-in tissues stands
+    assert re.fullmatch(r"[0-9a-f]{64}", store.config_hash(j.config))
