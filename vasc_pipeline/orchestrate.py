@@ -37,6 +37,7 @@ from .cluster import (
     check_cluster,
     has_bokeh,
     open_client,
+    probe_scheduler,
     slurm_cluster,
     slurm_job_script,
     wait_for_workers,
@@ -173,6 +174,8 @@ def run_sweep(
     name = cfg.sweep.name if cfg.sweep else "single run"
     if cfg.cluster.dry_run:
         return _dry_run(cfg, p, stream)
+    if client is None and cfg.cluster.address:
+        probe_scheduler(cfg.cluster)  # before any store is written: a wrong address is refused, never waited on
     with output_dir_lock(p.output_dir):
         inspect_stores(p)
         create_stores(p)
