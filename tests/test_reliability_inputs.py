@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import TINY_RUN
+from helpers import TINY_RUN, cli, finish
 
 from vasc_pipeline import config, engine, orchestrate, planning, store, sweep
 from vasc_pipeline.config import ConfigError
@@ -115,3 +115,34 @@ def test_runs_without_input_files_keep_their_identity():
     (j,) = sweep.expand(config.compose(TINY_RUN))
     assert INPUTS not in j.config  # the hash of every earlier store of the built-in tissues stands
     assert re.fullmatch(r"[0-9a-f]{64}", store.config_hash(j.config))
+
+
+# -- 4. counts written as floats --------------------------------------------------------------
+
+
+def test_a_count_written_as_a_float_is_the_integer_it_is():
+    cfg = config.compose([*TINY_RUN, "anneal.steps=1e5", "anneal.trace_every=5e4", "sweep.steps=[1e4,2.5e4]"])
+    assert cfg.anneal.steps == 100_000 and isinstance(cfg.anneal.steps, int)
+    assert cfg.anneal.trace_every == 50_000 and cfg.sweep.steps == [10_000, 25_000]
+    assert [j.coords["steps"] for j in sweep.expand(cfg)] == [10_000, 25_000]
+    assert config.compose([*TINY_RUN, "anneal.T_start=1e5"]).anneal.T_start == 1e5  # floats stay floats
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("anneal.steps=150000.5", r"anneal\.steps must be an integer \(a count\), got 150000\.5"),
+        ("sweep.steps=[1e4,1.5e4,2.5e-1]", r"sweep\.steps\[2\] must be an integer \(a count\), got 2\.5e-1"),
+    ],
+)
+def test_a_count_with_a_fraction_is_refused_naming_the_key(override, message):
+    with pytest.raises(ConfigError, match=message):
+        config.compose([*TINY_RUN, override])
+
+
+def test_the_command_line_takes_1e5_steps_and_refuses_a_fraction(tmp_path):
+    code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "anneal.steps=2e3", "cluster.dry_run=true"))
+    assert code == 0 and "(2000 proposed moves; new)" in output, output
+    code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "anneal.steps=150000.5"))
+    assert code == 2 and "anneal.steps must be an integer (a count), got 150000.5" in output, output
+    assert "Traceback" not in output and not (tmp_path / "runs").exists()

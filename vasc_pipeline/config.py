@@ -13,6 +13,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -39,6 +40,7 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.pipeline_config (re-e
     "scheduled_steps",
     "packing_steps",
     "compose",
+    "integral_counts",
     "CONFIG_DIR",
 ]
 
@@ -531,6 +533,64 @@ def with_sweep_group(overrides: list[str] | tuple[str, ...]) -> list[str]:
     return list(overrides)
 
 
+def _count_keys() -> set[str]:
+    """The dotted keys of the schema that hold a count (an int, or a list of ints)."""
+    import typing
+
+    out: set[str] = set()
+
+    def walk(cls: type, prefix: str) -> None:
+        for name, hint in typing.get_type_hints(cls).items():
+            args = [a for a in typing.get_args(hint) if a is not type(None)]
+            kind = args[0] if typing.get_origin(hint) is typing.Union and len(args) == 1 else hint
+            if hasattr(kind, "__dataclass_fields__"):
+                walk(kind, f"{prefix}{name}.")
+            elif kind is int or (typing.get_origin(kind) is list and typing.get_args(kind) == (int,)):
+                out.add(prefix + name)
+
+    walk(RunConfig, "")
+    return out
+
+
+def _integral(key: str, text: str) -> str:
+    """``text`` of a count as an integer literal when it is a float literal of an integer (``1e5``);
+    ConfigError naming ``key`` when it is a float literal of a fraction; anything else unchanged."""
+    from decimal import Decimal, InvalidOperation
+
+    t = text.strip()
+    if not re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", t) or re.fullmatch(r"[+-]?\d+", t):
+        return text
+    try:
+        value = Decimal(t)
+    except InvalidOperation:
+        return text
+    if value != value.to_integral_value():
+        raise ConfigError(f"{key} must be an integer (a count), got {t}")
+    return str(int(value))
+
+
+def integral_counts(overrides: list[str] | tuple[str, ...]) -> list[str]:
+    """``overrides`` with every count written as a float (``anneal.steps=1e5``,
+    ``sweep.steps=[1e4,1e5]``, as the docs write step counts) given as the integer it is; a
+    fraction (``anneal.steps=1.5e5+0.5``, i.e. 150000.5) is refused naming the key."""
+    counts = _count_keys()
+    out = []
+    for o in overrides:
+        key, eq, value = o.partition("=")
+        name = key.lstrip("+~").partition("@")[0]
+        if not eq or name not in counts:
+            out.append(o)
+            continue
+        v = value.strip()
+        if v.startswith("[") and v.endswith("]"):
+            items = [_integral(f"{name}[{i}]", x) for i, x in enumerate(v[1:-1].split(","))] if v[1:-1].strip() else []
+            value = "[" + ",".join(items) + "]"
+        else:
+            value = _integral(name, value)
+        out.append(f"{key}={value}")
+    return out
+
+
 def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config", check: bool = True) -> RunConfig:
     """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
 
@@ -549,7 +609,7 @@ def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "con
         GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-            cfg = hydra_compose(config_name=config_name, overrides=with_sweep_group(overrides))
+            cfg = hydra_compose(config_name=config_name, overrides=with_sweep_group(integral_counts(overrides)))
     except (HydraException, OmegaConfBaseException) as exc:
         raise ConfigError(hydra_error_message(exc)) from exc
     cfg = to_run_config(cfg)
