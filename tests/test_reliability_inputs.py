@@ -146,3 +146,26 @@ def test_the_command_line_takes_1e5_steps_and_refuses_a_fraction(tmp_path):
     code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "anneal.steps=150000.5"))
     assert code == 2 and "anneal.steps must be an integer (a count), got 150000.5" in output, output
     assert "Traceback" not in output and not (tmp_path / "runs").exists()
+
+
+# -- 5. physical parameters inside the range where the model is defined ----------------------
+
+
+@pytest.mark.parametrize("gamma", ["0.01", "0.5", "4.5", "100"])
+def test_gamma_outside_the_model_is_refused_naming_it(gamma):
+    with pytest.raises(ConfigError, match=rf"physics\.gamma must lie in \[1, 4\].*got {gamma}"):
+        config.compose([*TINY_RUN, f"physics.gamma={gamma}"])
+
+
+@pytest.mark.parametrize(
+    "override", ["physics.inlet_radius=1e-80", "physics.viscosity=1e300", "physics.total_flow=1e200"]
+)
+def test_physics_giving_a_segment_an_undefined_cost_is_refused(override):
+    with pytest.raises(ConfigError, match=r"outside the floating-point range .* the model is not defined"):
+        config.compose([*TINY_RUN, override])
+
+
+def test_gamma_across_its_range_runs():
+    for gamma in ("1", "2.1", "4"):
+        problem = engine.build_problem(config.compose([*TINY_RUN, f"physics.gamma={gamma}"]))
+        assert np.isfinite(problem.model.tables).all() and (problem.model.tables[:, 1:] > 0).all()

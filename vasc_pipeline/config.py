@@ -55,6 +55,10 @@ MAX_STEPS = 10**15
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
 MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: the map no longer resolves the tissue
+# The bifurcation exponent of r_parent^gamma = sum r_child^gamma (radii r = r_t n^(1/gamma)): measured
+# trees lie in between (Murray's 3, the paper's coronary 2.1, 2-3 elsewhere). Far outside, the radii
+# span hundreds of decades over N (gamma = 0.01: r_t ~ 1e-230 m) and the flow solve is singular.
+GAMMA_RANGE = (1.0, 4.0)
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
@@ -366,6 +370,12 @@ def validate(cfg: RunConfig) -> RunConfig:
         value = getattr(p, name)
         if not (value >= 0 and math.isfinite(value)):
             raise ConfigError(f"physics.{name} must be a finite number >= 0, got {value}")
+    if not GAMMA_RANGE[0] <= p.gamma <= GAMMA_RANGE[1]:
+        raise ConfigError(
+            f"physics.gamma must lie in [{GAMMA_RANGE[0]:g}, {GAMMA_RANGE[1]:g}] (the bifurcation exponent of "
+            f"r_parent^gamma = sum r_child^gamma: Murray's 3, the paper's 2.1), got {p.gamma:g}"
+        )
+    _check_segment_costs(cfg)
     a = cfg.anneal
     if a.T_start is not None:
         _positive("anneal.T_start", a.T_start)
@@ -477,6 +487,34 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return cfg
+
+
+def _check_segment_costs(cfg: RunConfig) -> None:
+    """Every segment's radius, Poiseuille resistance, power and volume cost (n = 1..N terminals
+    downstream, r = r_in (n / N)^(1/gamma)) must be a finite number > 0 in float64: where the
+    physics parameters together leave that range, the model is not defined (and the flow
+    solve fails far from the setting that caused it)."""
+    import numpy as np
+
+    p = cfg.physics
+    n = np.arange(1, cfg.n_terminals + 1, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        r = p.inlet_radius * (n / cfg.n_terminals) ** (1.0 / p.gamma)
+        resistance = 8.0 * p.viscosity / (math.pi * r**4)
+        parts = {
+            "radius": r,
+            "resistance": resistance,
+            "power": (n * p.total_flow / cfg.n_terminals) ** 2 * resistance,
+            "volume cost": p.m_b * math.pi * r**2,
+        }
+    for what, values in parts.items():
+        if not (np.all(np.isfinite(values)) and np.all(values > 0)):
+            raise ConfigError(
+                f"physics.inlet_radius={p.inlet_radius:g}, physics.viscosity={p.viscosity:g}, "
+                f"physics.total_flow={p.total_flow:g}, physics.m_b={p.m_b:g} and physics.gamma={p.gamma:g} give "
+                f"N={cfg.n_terminals} terminal segments a {what} outside the floating-point range (terminal radius "
+                f"{float(r[0]):.3g} m): the model is not defined there"
+            )
 
 
 def _check_tissue_keys(tissue: TissueConfig) -> None:
