@@ -169,3 +169,26 @@ def test_gamma_across_its_range_runs():
     for gamma in ("1", "2.1", "4"):
         problem = engine.build_problem(config.compose([*TINY_RUN, f"physics.gamma={gamma}"]))
         assert np.isfinite(problem.model.tables).all() and (problem.model.tables[:, 1:] > 0).all()
+
+
+# -- 6. +stage=reduce while a sweep runs ------------------------------------------------------
+
+
+def test_reduce_while_a_sweep_holds_the_directory_names_the_runs_and_the_sweep(tmp_path):
+    import io
+    import os
+
+    out = tmp_path / "out"
+    overrides = [*TINY_RUN, f"output_dir={out}", "+sweep=single", "sweep.seeds=[0,1]"]
+    p = plan_and_create(overrides)  # two stores, status "running", as a sweep leaves them while it runs
+    log = io.StringIO()
+    with orchestrate.output_dir_lock(out):  # the sweep's lock (another open file: flock tells them apart)
+        assert orchestrate.reduce_stage(config.compose(overrides), log) == 2
+    text = log.getvalue()
+    for j in p.jobs:
+        assert f"{j.run_id}.zarr: status 'running' (not complete: 0 of 2000 proposed moves)" in text, text
+    assert f"a sweep is running in this output_dir (pid {os.getpid()} on " in text, text
+    assert "run the sweep first" not in text
+    log = io.StringIO()  # no sweep holding it: the advice is to run one
+    assert orchestrate.reduce_stage(config.compose(overrides), log) == 2
+    assert "run the sweep first" in log.getvalue() and "a sweep is running" not in log.getvalue()
