@@ -192,3 +192,29 @@ def test_reduce_while_a_sweep_holds_the_directory_names_the_runs_and_the_sweep(t
     log = io.StringIO()  # no sweep holding it: the advice is to run one
     assert orchestrate.reduce_stage(config.compose(overrides), log) == 2
     assert "run the sweep first" in log.getvalue() and "a sweep is running" not in log.getvalue()
+
+
+# -- smaller cases ----------------------------------------------------------------------------
+
+
+def test_a_nan_in_the_terminals_csv_is_named_as_such(tmp_path, recwarn):
+    from vasc_pipeline.tree import TreeError
+
+    problem = engine.build_problem(config.compose(TINY_RUN))
+    sites = engine.initial_state(problem, seed=0).position[1:17]
+    csv = tmp_path / "sites.csv"
+    np.savetxt(csv, sites, delimiter=",", header="x,y,z", comments="")
+    lines = csv.read_text().splitlines()
+    lines[4] = lines[4].split(",")[0] + ",,0.0"  # site 3: a missing y
+    csv.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TreeError, match=r"terminals\.path: site 3 of .* three finite coordinates"):
+        engine.build_problem(config.compose([*TINY_RUN, f"terminals.path={csv}"]))
+    assert not [w for w in recwarn if "invalid value" in str(w.message)]
+
+
+def test_an_output_dir_that_is_a_file_is_refused_as_such(tmp_path):
+    target = tmp_path / "results.txt"
+    target.write_text("not a directory")
+    code, output = finish(cli(*TINY_RUN, f"output_dir={target}"))
+    assert code == 2 and f"output_dir: {str(target)!r} is a file, not a directory" in output, output
+    assert target.read_text() == "not a directory"

@@ -109,6 +109,11 @@ def sweep_in_progress(output_dir: str | os.PathLike) -> str | None:
 def check_output_dir(output_dir: str | os.PathLike) -> Path:
     """Create ``output_dir`` if needed and prove it writable; OSError naming the field otherwise."""
     out = Path(output_dir)
+    if out.exists() and not out.is_dir():
+        raise OSError(
+            f"output_dir: {str(out)!r} is a file, not a directory; choose a directory for the results with "
+            "output_dir=..."
+        )
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test-{os.getpid()}"

@@ -275,6 +275,12 @@ def load_terminal_sites(path: str, tissue: Tissue) -> np.ndarray:
         raise TreeError(f"terminals.path: cannot read {path!r} as x, y, z in metres: {exc}") from exc
     if len(sites) < 2:
         raise TreeError(f"terminals.path: {path!r} holds {len(sites)} sites; at least 2 are needed")
+    bad = np.flatnonzero(~np.isfinite(sites).all(axis=1))
+    if bad.size:  # before the tissue test, which would call the site "outside" (and warn)
+        raise TreeError(
+            f"terminals.path: site {bad[0]} of {path!r} is {sites[bad[0]].tolist()}: every site needs three "
+            f"finite coordinates x, y, z in metres ({bad.size} site(s) with a missing, NaN or infinite value)"
+        )
     outside = np.flatnonzero(~tissue.contains(sites))
     if outside.size:
         raise TreeError(f"terminals.path: site {outside[0]} at {sites[outside[0]].tolist()} m lies outside the tissue")
