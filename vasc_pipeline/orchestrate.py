@@ -75,8 +75,69 @@ __all__ = [  # with the planning, cluster, progress and outdir names it uses (re
 # Compilation and the Dask task
 
 
-def compile_kernels() -> None:
-    """Run a tiny problem for a few steps: compiles every kernel once, or loads the disk cache."""
+COMPILE_NOTICE_AFTER = 2.0  # seconds: loading the cached kernels takes about 1 s, compiling them minutes
+
+
+def compile_kernels(jobs: list[Job] | None = None, stream: TextIO | None = None) -> None:
+    """Compile the kernels once here (or load numba's disk cache), before workers need them.
+
+    With ``jobs``, one job's own config per distinct supply dtype runs for a few steps: the
+    kernels its schedule calls (the calibration of T_start, adapted steps, packing, CCO when the
+    method or init uses it) and their argument types are those of the sweep, so workers compile
+    nothing (a generic tiny problem left ``anneal=fast``'s calibration and moves to the workers,
+    which then showed 0 steps/s while compiling). Without ``jobs``: a generic tiny problem.
+    When that takes longer than :data:`COMPILE_NOTICE_AFTER`, ``stream`` is told what happens.
+    """
+    import threading
+
+    def tell() -> None:
+        if stream is not None:
+            stream.write(
+                "vasc_pipeline: compiling the numba kernels (first run only, about 1-3 min; cached for later runs)...\n"
+            )
+            stream.flush()
+
+    notice = threading.Timer(COMPILE_NOTICE_AFTER, tell)
+    notice.daemon = True
+    started = time.monotonic()
+    notice.start()
+    try:
+        if jobs:
+            _warm_up(jobs)
+        else:
+            _warm_up_generic()
+    finally:
+        notice.cancel()
+    if stream and time.monotonic() - started > COMPILE_NOTICE_AFTER:
+        stream.write(f"vasc_pipeline: kernels compiled in {time.monotonic() - started:.0f} s\n")
+        stream.flush()
+
+
+def _warm_up(jobs: list[Job]) -> None:
+    """A few steps of each distinct kind of job (see :func:`compile_kernels`)."""
+    from . import engine
+
+    seen = set()
+    for j in jobs:
+        cfg = _config.to_run_config(j.config)  # a copy: the job's config is left as it is
+        kind = (engine.supply_dtype(cfg.n_terminals), cfg.method.name, cfg.anneal.init)
+        if kind in seen:
+            continue
+        seen.add(kind)
+        try:
+            if cfg.method.name == "cco":
+                from .cco import grow
+
+                grow(engine.build_problem(cfg), 0)
+                continue
+            cfg.anneal.steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
+            cfg.anneal.trace_every = 64
+            engine.run(cfg, seed=int(cfg.seed))
+        except Exception:  # the job itself fails the same way, and its run reports it
+            continue
+
+
+def _warm_up_generic() -> None:
     from . import engine
 
     cfg = _config.RunConfig(n_terminals=4)
@@ -199,7 +260,7 @@ def run_sweep(
             "damaged": dict(p.damaged),
         }
         if pending:
-            compile_kernels()
+            compile_kernels(pending, stream)
             with contextlib.ExitStack() as stack:
                 if client is None:
                     client = stack.enter_context(open_client(cfg.cluster, len(pending), p.output_dir))
