@@ -25,6 +25,7 @@ and, optionally, a Dask client of their own). The path of a sweep:
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
 import time
 import uuid
@@ -439,6 +440,27 @@ def _collect(fut: Any, job: Job, progress: Progress, result: dict) -> None:
         progress.failed(job.run_id, error)
 
 
+@contextlib.contextmanager
+def _terminate_as_interrupt(terminated: list[int]):
+    """SIGTERM (a batch system's, ``kill``) ends the sweep as Ctrl-C does: the cluster is closed
+    and the interruption reported; the status stays 143 (128 + SIGTERM). Main thread only."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(cfg: Any, stream: TextIO | None = None) -> int:
     """Entry point behind ``python -m vasc_pipeline``: run the sweep, return the exit status.
 
@@ -456,17 +478,19 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
     stream = stream or sys.stderr
     if getattr(cfg, "stage", "run") == "reduce":
         return reduce_stage(cfg, stream)
+    terminated: list[int] = []
     try:
-        result = run_sweep(cfg, stream=stream)
+        with _terminate_as_interrupt(terminated):
+            result = run_sweep(cfg, stream=stream)
     except (ConfigError, TissueError, TreeError, StoreError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\nExisting results were left as they were.\n")
         return 2
     except KeyboardInterrupt:
         stream.write(
-            "\nvasc_pipeline: interrupted. Finished runs are stored; the others resume from their last "
-            "checkpoint when the same command is run again.\n"
+            f"\nvasc_pipeline: {'terminated (SIGTERM)' if terminated else 'interrupted'}. Finished runs are "
+            "stored; the others resume from their last checkpoint when the same command is run again.\n"
         )
-        return 130
+        return 128 + signal.SIGTERM if terminated else 130
     except SweepStartError as exc:
         stream.write(
             f"vasc_pipeline: error: {exc}. Stores already created resume when the same command is run again.\n"
