@@ -218,3 +218,33 @@ def test_an_output_dir_that_is_a_file_is_refused_as_such(tmp_path):
     code, output = finish(cli(*TINY_RUN, f"output_dir={target}"))
     assert code == 2 and f"output_dir: {str(target)!r} is a file, not a directory" in output, output
     assert target.read_text() == "not a directory"
+
+
+def test_duplicate_terminal_sites_warn_and_are_refused_when_fixed(tmp_path):
+    from vasc_pipeline.tree import TreeError
+
+    problem = engine.build_problem(config.compose(TINY_RUN))
+    sites = engine.initial_state(problem, seed=0).position[1:17]
+    sites[9] = sites[2]
+    csv = tmp_path / "sites.csv"
+    np.savetxt(csv, sites, delimiter=",", header="x,y,z", comments="")
+    with pytest.warns(UserWarning, match=r"terminals\.path: sites 2 and 9 of .* are the same point"):
+        engine.build_problem(config.compose([*TINY_RUN, f"terminals.path={csv}"]))
+    with pytest.raises(TreeError, match=r"sites 2 and 9 .* terminals\.fixed=true they would stay at one point"):
+        engine.build_problem(config.compose([*TINY_RUN, f"terminals.path={csv}", "terminals.fixed=true"]))
+
+
+def test_a_garbled_cost_attribute_is_a_damaged_store_for_the_sweep_and_the_reduction(tmp_path):
+    from vasc_pipeline import job, reduce
+
+    out = tmp_path / "out"
+    overrides = [*TINY_RUN, f"output_dir={out}"]
+    (j,) = sweep.expand(config.compose(overrides))
+    assert job.run_job(j)["status"] == "complete"
+    store.RunStore.open(j.store)._set_attrs(cost="garbled")
+    p = planning.plan(config.compose(overrides))
+    planning.inspect_stores(p)
+    assert j.run_id in p.damaged and "holds no total cost" in p.damaged[j.run_id]
+    assert not p.complete
+    with pytest.raises(reduce.ReductionError, match=r"is damaged: its final cost attribute holds no total cost"):
+        reduce.reduce(out, figures=False, exports=False)

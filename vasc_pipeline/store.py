@@ -430,6 +430,10 @@ class RunStore(CheckpointsMixin):
         for key, crc in (attrs.get("checksums") or {}).items():
             if key not in arrays or crc32(arrays[key]) != crc:
                 raise StoreError(f"array {key!r} fails its CRC-32 check")
+        cost = attrs.get("cost")
+        total = cost.get("total") if isinstance(cost, Mapping) else None
+        if isinstance(total, bool) or not isinstance(total, (int, float)):
+            raise StoreError(f"its final cost attribute holds no total cost (cost={str(cost)[:80]!r})")
 
     # -- completion -------------------------------------------------------------------------
 
