@@ -248,3 +248,15 @@ def test_a_garbled_cost_attribute_is_a_damaged_store_for_the_sweep_and_the_reduc
     assert not p.complete
     with pytest.raises(reduce.ReductionError, match=r"is damaged: its final cost attribute holds no total cost"):
         reduce.reduce(out, figures=False, exports=False)
+
+
+def test_reduce_with_an_override_unlike_the_runs_is_refused(tmp_path):
+    from vasc_pipeline import job
+
+    out = tmp_path / "out"
+    (j,) = sweep.expand(config.compose([*TINY_RUN, f"output_dir={out}"]))
+    assert job.run_job(j)["status"] == "complete"
+    code, output = finish(cli("+stage=reduce", f"output_dir={out}", "physics.gamma=3"))
+    assert code == 2, output
+    assert "physics.gamma=3.0 (the runs: 2.1)" in output and "Nothing was reduced" in output, output
+    assert not (out / "summary.zarr").exists()

@@ -399,12 +399,56 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
             "reduce. Give the output_dir of a sweep (output_dir=...).\n"
         )
         return 2
+    ignored = _overrides_unlike_the_runs(cfg, output_dir)
+    if ignored:
+        stream.write(
+            f"vasc_pipeline: error: +stage=reduce reduces the runs of {str(output_dir)!r} as they were made, and "
+            f"they were made with other values: {'; '.join(ignored)}. Drop those overrides (or run a sweep with "
+            "them into a new output_dir=...). Nothing was reduced.\n"
+        )
+        return 2
     try:
         reduction = reduce(output_dir, stream=stream)
     except (ReductionError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2
     return 1 if reduction.errors or reduction.damaged else 0
+
+
+def _overrides_unlike_the_runs(cfg: Any, output_dir: Path) -> list[str]:
+    """The command-line ``key=value`` overrides (Hydra's, when it runs) of keys the stored runs
+    hold with another value: ``+stage=reduce physics.gamma=3`` on runs made with 2.1 would
+    otherwise be ignored without a word. Sweep axes, output_dir, stage, sweep, cluster and
+    checkpoint keys, and group choices, are not compared."""
+    from omegaconf import OmegaConf
+
+    from .store import SWEEP_AXES, RunStore
+
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        overrides = list(HydraConfig.get().overrides.task)
+    except (ImportError, ValueError):  # not under Hydra (a test, a script): nothing typed
+        return []
+    stored = None
+    for path in sorted((output_dir / RUNS_DIR).glob("*.zarr")):
+        try:
+            stored = RunStore.open(path, mode="r").attrs.get("config") or {}
+            break
+        except StoreError:
+            continue
+    out = []
+    for o in overrides:
+        key = o.lstrip("+~").partition("=")[0]
+        if "." not in key or key in SWEEP_AXES or key.split(".")[0] in ("sweep", "cluster", "checkpoint", "hydra"):
+            continue
+        node: Any = stored
+        for part in key.split("."):
+            node = node.get(part, KeyError) if isinstance(node, dict) else KeyError
+        requested = OmegaConf.select(cfg, key, default=KeyError) if OmegaConf.is_config(cfg) else KeyError
+        if node is not KeyError and requested is not KeyError and node != requested:
+            out.append(f"{key}={requested} (the runs: {node})")
+    return out
 
 
 def _wait_some(wait, futures: set, timeout: float) -> tuple[set, set]:
