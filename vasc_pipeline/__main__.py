@@ -47,4 +47,9 @@ def _check_overrides(args: list[str]) -> None:
 if __name__ == "__main__":
     sys.argv[1:] = config.with_sweep_group(sys.argv[1:])
     _check_overrides(sys.argv[1:])
+    try:  # counts written as floats (anneal.steps=1e5) as the integers they are, for Hydra
+        sys.argv[1:] = config.integral_counts(sys.argv[1:])
+    except config.ConfigError as exc:
+        sys.stderr.write(f"vasc_pipeline: error: {exc}\nNothing was run; existing results were left as they were.\n")
+        sys.exit(2)
     _main()

@@ -17,6 +17,7 @@ import logging
 import math
 import os
 import shutil
+import time
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -30,6 +31,7 @@ __all__ = [
     "slurm_job_script",
     "has_bokeh",
     "wait_for_workers",
+    "probe_scheduler",
     "SweepStartError",
 ]
 
@@ -106,6 +108,86 @@ def check_cluster(cluster: ClusterConfig) -> None:
                 "cluster=slurm submits jobs with sbatch, which is not on PATH here: run the sweep on "
                 "a SLURM login node (cluster.dry_run=true prints the job script without submitting)"
             )
+
+
+PROBE_SECONDS = 10.0  # at most this long (and at most cluster.startup_timeout) for each step of the probe
+
+
+def probe_scheduler(cluster: ClusterConfig) -> None:
+    """Refuse (ConfigError, one line) a ``tcp://`` ``cluster.address`` where no Dask scheduler answers.
+
+    Before any store is written: connect with a timeout and read the greeting a Dask scheduler
+    sends first (its comm handshake: an 8-byte length, a frame count, msgpack). Something else
+    on the port is named: a server that sends another greeting (an SSH banner: Dask would read
+    its bytes as a frame length), one that waits for the client (an HTTP server such as the
+    dashboard, asked once with ``GET /``), or nothing at all. ``tls://`` addresses are only
+    connected to (their greeting is encrypted).
+    """
+    import socket
+    import struct
+    from urllib.parse import urlsplit
+
+    address = cluster.address
+    scheme = address.partition("://")[0].lower()
+    if scheme not in ("tcp", "tls"):
+        return
+    try:
+        parts = urlsplit(address)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if not host or not port:
+        raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {address!r}")
+    wait = min(float(cluster.startup_timeout), PROBE_SECONDS)
+    expected = "expected a Dask scheduler (dask scheduler prints its 'Scheduler at: tcp://host:port'; 8786 by default)"
+    try:
+        sock = socket.create_connection((host, port), timeout=wait)
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise ConfigError(f"cluster.address {address}: cannot connect ({why} within {wait:g} s); {expected}") from None
+    with sock:
+        if scheme == "tls":
+            return
+        data = b""
+        deadline = time.monotonic() + wait
+        try:
+            while len(data) < 16 and time.monotonic() < deadline:
+                sock.settimeout(max(deadline - time.monotonic(), 0.01))
+                chunk = sock.recv(256)
+                if not chunk:
+                    break
+                data += chunk
+        except (TimeoutError, OSError):
+            pass
+        if len(data) >= 16:
+            total, frames = struct.unpack("<QQ", data[:16])
+            if 0 < total < 2**20 and 1 <= frames <= 64:
+                return  # a Dask comm handshake
+        if data:
+            raise ConfigError(
+                f"cluster.address {address}: the server there answered {_first_line(data)!r}, which is not the "
+                f"greeting of a Dask scheduler; {expected}"
+            )
+        reply = b""
+        try:  # silent so far: servers that wait for the client, HTTP above all, answer a request
+            sock.settimeout(wait)
+            sock.sendall(f"GET / HTTP/1.0\r\nHost: {host}\r\n\r\n".encode())
+            reply = sock.recv(256)
+        except OSError:
+            pass
+    if reply.startswith(b"HTTP/"):
+        raise ConfigError(
+            f"cluster.address {address}: an HTTP server answered ({_first_line(reply)!r}; a Dask dashboard's "
+            f"port, 8787 by default?), not a Dask scheduler; {expected}"
+        )
+    raise ConfigError(
+        f"cluster.address {address}: something accepted the connection but sent no Dask greeting within "
+        f"{wait:g} s" + (f" (it answered {_first_line(reply)!r} to a request)" if reply else "") + f"; {expected}"
+    )
+
+
+def _first_line(data: bytes) -> str:
+    return data.splitlines()[0][:80].decode("ascii", "backslashreplace") if data.strip() else repr(data[:32])
 
 
 def _check_slurm_resources(s: Any) -> None:

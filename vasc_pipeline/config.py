@@ -13,6 +13,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import re
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -40,6 +41,7 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.pipeline_config (re-e
     "scheduled_steps",
     "packing_steps",
     "compose",
+    "integral_counts",
     "CONFIG_DIR",
 ]
 
@@ -54,6 +56,10 @@ MAX_STEPS = 10**15
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
 MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: the map no longer resolves the tissue
+# The bifurcation exponent of r_parent^gamma = sum r_child^gamma (radii r = r_t n^(1/gamma)): measured
+# trees lie in between (Murray's 3, the paper's coronary 2.1, 2-3 elsewhere). Far outside, the radii
+# span hundreds of decades over N (gamma = 0.01: r_t ~ 1e-230 m) and the flow solve is singular.
+GAMMA_RANGE = (1.0, 4.0)
 SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
@@ -380,6 +386,12 @@ def validate(cfg: RunConfig) -> RunConfig:
         value = getattr(p, name)
         if not (value >= 0 and math.isfinite(value)):
             raise ConfigError(f"physics.{name} must be a finite number >= 0, got {value}")
+    if not GAMMA_RANGE[0] <= p.gamma <= GAMMA_RANGE[1]:
+        raise ConfigError(
+            f"physics.gamma must lie in [{GAMMA_RANGE[0]:g}, {GAMMA_RANGE[1]:g}] (the bifurcation exponent of "
+            f"r_parent^gamma = sum r_child^gamma: Murray's 3, the paper's 2.1), got {p.gamma:g}"
+        )
+    _check_segment_costs(cfg)
     a = cfg.anneal
     if a.T_start is not None:
         _positive("anneal.T_start", a.T_start)
@@ -510,6 +522,34 @@ def _check_labels(labels: LabelsConfig) -> None:
             seen[v] = role
 
 
+def _check_segment_costs(cfg: RunConfig) -> None:
+    """Every segment's radius, Poiseuille resistance, power and volume cost (n = 1..N terminals
+    downstream, r = r_in (n / N)^(1/gamma)) must be a finite number > 0 in float64: where the
+    physics parameters together leave that range, the model is not defined (and the flow
+    solve fails far from the setting that caused it)."""
+    import numpy as np
+
+    p = cfg.physics
+    n = np.arange(1, cfg.n_terminals + 1, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        r = p.inlet_radius * (n / cfg.n_terminals) ** (1.0 / p.gamma)
+        resistance = 8.0 * p.viscosity / (math.pi * r**4)
+        parts = {
+            "radius": r,
+            "resistance": resistance,
+            "power": (n * p.total_flow / cfg.n_terminals) ** 2 * resistance,
+            "volume cost": p.m_b * math.pi * r**2,
+        }
+    for what, values in parts.items():
+        if not (np.all(np.isfinite(values)) and np.all(values > 0)):
+            raise ConfigError(
+                f"physics.inlet_radius={p.inlet_radius:g}, physics.viscosity={p.viscosity:g}, "
+                f"physics.total_flow={p.total_flow:g}, physics.m_b={p.m_b:g} and physics.gamma={p.gamma:g} give "
+                f"N={cfg.n_terminals} terminal segments a {what} outside the floating-point range (terminal radius "
+                f"{float(r[0]):.3g} m): the model is not defined there"
+            )
+
+
 def _check_tissue_keys(tissue: TissueConfig) -> None:
     """A tissue key the chosen tissue does not read (``tissue.mass_g`` with ``tissue=sphere``)
     must keep its default: set, it would change nothing but the run's identity."""
@@ -564,6 +604,64 @@ def with_sweep_group(overrides: list[str] | tuple[str, ...]) -> list[str]:
     return list(overrides)
 
 
+def _count_keys() -> set[str]:
+    """The dotted keys of the schema that hold a count (an int, or a list of ints)."""
+    import typing
+
+    out: set[str] = set()
+
+    def walk(cls: type, prefix: str) -> None:
+        for name, hint in typing.get_type_hints(cls).items():
+            args = [a for a in typing.get_args(hint) if a is not type(None)]
+            kind = args[0] if typing.get_origin(hint) is typing.Union and len(args) == 1 else hint
+            if hasattr(kind, "__dataclass_fields__"):
+                walk(kind, f"{prefix}{name}.")
+            elif kind is int or (typing.get_origin(kind) is list and typing.get_args(kind) == (int,)):
+                out.add(prefix + name)
+
+    walk(RunConfig, "")
+    return out
+
+
+def _integral(key: str, text: str) -> str:
+    """``text`` of a count as an integer literal when it is a float literal of an integer (``1e5``);
+    ConfigError naming ``key`` when it is a float literal of a fraction; anything else unchanged."""
+    from decimal import Decimal, InvalidOperation
+
+    t = text.strip()
+    if not re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", t) or re.fullmatch(r"[+-]?\d+", t):
+        return text
+    try:
+        value = Decimal(t)
+    except InvalidOperation:
+        return text
+    if value != value.to_integral_value():
+        raise ConfigError(f"{key} must be an integer (a count), got {t}")
+    return str(int(value))
+
+
+def integral_counts(overrides: list[str] | tuple[str, ...]) -> list[str]:
+    """``overrides`` with every count written as a float (``anneal.steps=1e5``,
+    ``sweep.steps=[1e4,1e5]``, as the docs write step counts) given as the integer it is; a
+    fraction (``anneal.steps=1.5e5+0.5``, i.e. 150000.5) is refused naming the key."""
+    counts = _count_keys()
+    out = []
+    for o in overrides:
+        key, eq, value = o.partition("=")
+        name = key.lstrip("+~").partition("@")[0]
+        if not eq or name not in counts:
+            out.append(o)
+            continue
+        v = value.strip()
+        if v.startswith("[") and v.endswith("]"):
+            items = [_integral(f"{name}[{i}]", x) for i, x in enumerate(v[1:-1].split(","))] if v[1:-1].strip() else []
+            value = "[" + ",".join(items) + "]"
+        else:
+            value = _integral(name, value)
+        out.append(f"{key}={value}")
+    return out
+
+
 def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "config", check: bool = True) -> RunConfig:
     """Resolved run config from Hydra overrides, e.g. ``compose(["tissue=plane2d", "n_terminals=64"])``.
 
@@ -582,7 +680,7 @@ def compose(overrides: list[str] | tuple[str, ...] = (), config_name: str = "con
         GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-            cfg = hydra_compose(config_name=config_name, overrides=with_sweep_group(overrides))
+            cfg = hydra_compose(config_name=config_name, overrides=with_sweep_group(integral_counts(overrides)))
     except (HydraException, OmegaConfBaseException) as exc:
         raise ConfigError(hydra_error_message(exc)) from exc
     cfg = to_run_config(cfg)

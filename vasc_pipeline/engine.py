@@ -27,7 +27,7 @@ from .physics import Physics, cost_tables, supply_radius
 from .rng import seed_state
 from .store import TRACE_FIELDS
 from .tissue import Tissue, TissueError, build_tissue
-from .tree import Tree, TreeError, load_terminal_sites, random_tree
+from .tree import Tree, TreeError, check_duplicate_sites, load_terminal_sites, random_tree
 
 __all__ = [
     "Problem",
@@ -113,6 +113,7 @@ def build_problem(config: Any) -> Problem:
             raise TreeError(
                 f"terminals.path holds {len(sites)} sites but n_terminals = {n}; set n_terminals={len(sites)}"
             )
+        check_duplicate_sites(sites, cfg.terminals.path, cfg.terminals.fixed)
     k = len(tissue.inlets)
     if n < k:
         raise TreeError(f"n_terminals must be >= the number of inlets ({k}) of tissue {tissue.name!r}, got {n}")

@@ -13,7 +13,16 @@ from typing import Any, Mapping
 
 from .config import KEYS_ADDED_LATER
 
-__all__ = ["hashed_config", "config_hash", "config_differences", "identity_differences", "SWEEP_AXES"]
+__all__ = [
+    "hashed_config",
+    "config_hash",
+    "config_differences",
+    "identity_differences",
+    "input_digests",
+    "SWEEP_AXES",
+    "INPUTS",
+    "INPUT_FILES",
+]
 
 # Config sections that do not change a run's result: where it is written, how often it
 # checkpoints, and how the sweep/cluster around it is organised. Everything else does.
@@ -21,6 +30,77 @@ _UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
 # The sweep axes (flattened config keys): the only settings in which the runs of one output_dir
 # may differ; everything else in it is one configuration (a cell is never a mix of physics).
 SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")
+# The input files a run reads (config key -> the key naming an array inside a Zarr group). Their
+# content is part of the run's identity: a stored config holds ``config[INPUTS]``, the SHA-256 of
+# each one set ({"tissue.path": "sha256:..."}), so a file overwritten under the same path is a
+# different run, refused like a changed key. Stores written before the digests existed have no
+# ``INPUTS`` section: their files' content is unknown, and they are compared without it.
+INPUT_FILES = {
+    "tissue.path": "tissue.array",
+    "tissue.exclusion_path": "tissue.exclusion_array",
+    "tissue.inlets_path": None,
+    "terminals.path": None,
+}
+INPUTS = "inputs"
+
+
+def _get(config: Mapping[str, Any], dotted: str) -> Any:
+    node: Any = config
+    for name in dotted.split("."):
+        node = node.get(name) if isinstance(node, Mapping) else None
+    return node
+
+
+def _file_digest(path: str, array: str | None) -> str | None:
+    """``sha256:<hex>`` of a file's bytes, or of a Zarr array as read (dtype, shape, data, attrs);
+    None when it cannot be read (the tissue or terminal loader then names the problem)."""
+    from pathlib import Path
+
+    p = Path(path).expanduser()
+    h = hashlib.sha256()
+    try:
+        if p.is_file():
+            with open(p, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+        elif p.is_dir():
+            import numpy as np
+            import zarr
+
+            node = zarr.open(str(p), mode="r")
+            if array:
+                node = node[array]
+            data = np.ascontiguousarray(node[...])
+            h.update(f"zarr:{data.dtype.str}:{data.shape}:".encode())
+            h.update(data.tobytes())
+            h.update(json.dumps(dict(node.attrs), sort_keys=True, default=str).encode())
+        else:
+            return None
+    except Exception:  # unreadable: left to the loader, whose error names the key
+        return None
+    return f"sha256:{h.hexdigest()}"
+
+
+def input_digests(config: Mapping[str, Any]) -> dict[str, str]:
+    """The content digest of every input file ``config`` names (:data:`INPUT_FILES`), by key."""
+    out = {}
+    for key, array_key in INPUT_FILES.items():
+        path = _get(config, key)
+        if path:
+            digest = _file_digest(str(path), _get(config, array_key) if array_key else None)
+            if digest is not None:
+                out[key] = digest
+    return out
+
+
+def _comparable(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> tuple[Mapping, Mapping]:
+    """Both configs without the input digests when one of them (a store written before them) has none."""
+    if (INPUTS in stored) == (INPUTS in requested):
+        return stored, requested
+    return (
+        {k: v for k, v in stored.items() if k != INPUTS},
+        {k: v for k, v in requested.items() if k != INPUTS},
+    )
 
 
 def hashed_config(config: Mapping[str, Any]) -> dict:
@@ -65,16 +145,23 @@ def config_differences(
 ) -> list[str]:
     """Human-readable ``key: stored -> requested`` lines for every result-determining difference
     (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
+    stored, requested = _comparable(stored, requested)
     a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
 
     def ignored(key: str) -> bool:  # an entry ending in "." ignores a whole section
         return any(key == i or (i.endswith(".") and key.startswith(i)) for i in ignore)
 
-    return [
-        f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
-        for k in sorted(set(a) | set(b))
-        if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")
-    ]
+    def line(k: str) -> str:
+        if k.startswith(INPUTS + "."):  # a digest: the file named by the key
+            key = k[len(INPUTS) + 1 :]
+            return (
+                f"{key}: the content of {b.get(key, a.get(key))!r} differs from the file the stored run read "
+                f"(sha256 {str(a.get(k, '<absent>'))[7:19]}... stored vs {str(b.get(k, '<absent>'))[7:19]}... "
+                "now): the file was changed in place"
+            )
+        return f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
+
+    return [line(k) for k in sorted(set(a) | set(b)) if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")]
 
 
 def _method(config: Mapping[str, Any]) -> str:

@@ -25,6 +25,7 @@ and, optionally, a Dask client of their own). The path of a sweep:
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
 import time
 import uuid
@@ -37,6 +38,7 @@ from .cluster import (
     check_cluster,
     has_bokeh,
     open_client,
+    probe_scheduler,
     slurm_cluster,
     slurm_job_script,
     wait_for_workers,
@@ -74,8 +76,69 @@ __all__ = [  # with the planning, cluster, progress and outdir names it uses (re
 # Compilation and the Dask task
 
 
-def compile_kernels() -> None:
-    """Run a tiny problem for a few steps: compiles every kernel once, or loads the disk cache."""
+COMPILE_NOTICE_AFTER = 2.0  # seconds: loading the cached kernels takes about 1 s, compiling them minutes
+
+
+def compile_kernels(jobs: list[Job] | None = None, stream: TextIO | None = None) -> None:
+    """Compile the kernels once here (or load numba's disk cache), before workers need them.
+
+    With ``jobs``, one job's own config per distinct supply dtype runs for a few steps: the
+    kernels its schedule calls (the calibration of T_start, adapted steps, packing, CCO when the
+    method or init uses it) and their argument types are those of the sweep, so workers compile
+    nothing (a generic tiny problem left ``anneal=fast``'s calibration and moves to the workers,
+    which then showed 0 steps/s while compiling). Without ``jobs``: a generic tiny problem.
+    When that takes longer than :data:`COMPILE_NOTICE_AFTER`, ``stream`` is told what happens.
+    """
+    import threading
+
+    def tell() -> None:
+        if stream is not None:
+            stream.write(
+                "vasc_pipeline: compiling the numba kernels (first run only, about 1-3 min; cached for later runs)...\n"
+            )
+            stream.flush()
+
+    notice = threading.Timer(COMPILE_NOTICE_AFTER, tell)
+    notice.daemon = True
+    started = time.monotonic()
+    notice.start()
+    try:
+        if jobs:
+            _warm_up(jobs)
+        else:
+            _warm_up_generic()
+    finally:
+        notice.cancel()
+    if stream and time.monotonic() - started > COMPILE_NOTICE_AFTER:
+        stream.write(f"vasc_pipeline: kernels compiled in {time.monotonic() - started:.0f} s\n")
+        stream.flush()
+
+
+def _warm_up(jobs: list[Job]) -> None:
+    """A few steps of each distinct kind of job (see :func:`compile_kernels`)."""
+    from . import engine
+
+    seen = set()
+    for j in jobs:
+        cfg = _config.to_run_config(j.config)  # a copy: the job's config is left as it is
+        kind = (engine.supply_dtype(cfg.n_terminals), cfg.method.name, cfg.anneal.init)
+        if kind in seen:
+            continue
+        seen.add(kind)
+        try:
+            if cfg.method.name == "cco":
+                from .cco import grow
+
+                grow(engine.build_problem(cfg), 0)
+                continue
+            cfg.anneal.steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
+            cfg.anneal.trace_every = 64
+            engine.run(cfg, seed=int(cfg.seed))
+        except Exception:  # the job itself fails the same way, and its run reports it
+            continue
+
+
+def _warm_up_generic() -> None:
     from . import engine
 
     cfg = _config.RunConfig(n_terminals=4)
@@ -173,6 +236,8 @@ def run_sweep(
     name = cfg.sweep.name if cfg.sweep else "single run"
     if cfg.cluster.dry_run:
         return _dry_run(cfg, p, stream)
+    if client is None and cfg.cluster.address:
+        probe_scheduler(cfg.cluster)  # before any store is written: a wrong address is refused, never waited on
     with output_dir_lock(p.output_dir):
         inspect_stores(p)
         create_stores(p)
@@ -196,7 +261,7 @@ def run_sweep(
             "damaged": dict(p.damaged),
         }
         if pending:
-            compile_kernels()
+            compile_kernels(pending, stream)
             with contextlib.ExitStack() as stack:
                 if client is None:
                     client = stack.enter_context(open_client(cfg.cluster, len(pending), p.output_dir))
@@ -334,12 +399,56 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
             "reduce. Give the output_dir of a sweep (output_dir=...).\n"
         )
         return 2
+    ignored = _overrides_unlike_the_runs(cfg, output_dir)
+    if ignored:
+        stream.write(
+            f"vasc_pipeline: error: +stage=reduce reduces the runs of {str(output_dir)!r} as they were made, and "
+            f"they were made with other values: {'; '.join(ignored)}. Drop those overrides (or run a sweep with "
+            "them into a new output_dir=...). Nothing was reduced.\n"
+        )
+        return 2
     try:
         reduction = reduce(output_dir, stream=stream)
     except (ReductionError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2
     return 1 if reduction.errors or reduction.damaged else 0
+
+
+def _overrides_unlike_the_runs(cfg: Any, output_dir: Path) -> list[str]:
+    """The command-line ``key=value`` overrides (Hydra's, when it runs) of keys the stored runs
+    hold with another value: ``+stage=reduce physics.gamma=3`` on runs made with 2.1 would
+    otherwise be ignored without a word. Sweep axes, output_dir, stage, sweep, cluster and
+    checkpoint keys, and group choices, are not compared."""
+    from omegaconf import OmegaConf
+
+    from .store import SWEEP_AXES, RunStore
+
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        overrides = list(HydraConfig.get().overrides.task)
+    except (ImportError, ValueError):  # not under Hydra (a test, a script): nothing typed
+        return []
+    stored = None
+    for path in sorted((output_dir / RUNS_DIR).glob("*.zarr")):
+        try:
+            stored = RunStore.open(path, mode="r").attrs.get("config") or {}
+            break
+        except StoreError:
+            continue
+    out = []
+    for o in overrides:
+        key = o.lstrip("+~").partition("=")[0]
+        if "." not in key or key in SWEEP_AXES or key.split(".")[0] in ("sweep", "cluster", "checkpoint", "hydra"):
+            continue
+        node: Any = stored
+        for part in key.split("."):
+            node = node.get(part, KeyError) if isinstance(node, dict) else KeyError
+        requested = OmegaConf.select(cfg, key, default=KeyError) if OmegaConf.is_config(cfg) else KeyError
+        if node is not KeyError and requested is not KeyError and node != requested:
+            out.append(f"{key}={requested} (the runs: {node})")
+    return out
 
 
 def _wait_some(wait, futures: set, timeout: float) -> tuple[set, set]:
@@ -375,6 +484,27 @@ def _collect(fut: Any, job: Job, progress: Progress, result: dict) -> None:
         progress.failed(job.run_id, error)
 
 
+@contextlib.contextmanager
+def _terminate_as_interrupt(terminated: list[int]):
+    """SIGTERM (a batch system's, ``kill``) ends the sweep as Ctrl-C does: the cluster is closed
+    and the interruption reported; the status stays 143 (128 + SIGTERM). Main thread only."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(cfg: Any, stream: TextIO | None = None) -> int:
     """Entry point behind ``python -m vasc_pipeline``: run the sweep, return the exit status.
 
@@ -392,17 +522,19 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
     stream = stream or sys.stderr
     if getattr(cfg, "stage", "run") == "reduce":
         return reduce_stage(cfg, stream)
+    terminated: list[int] = []
     try:
-        result = run_sweep(cfg, stream=stream)
+        with _terminate_as_interrupt(terminated):
+            result = run_sweep(cfg, stream=stream)
     except (ConfigError, TissueError, TreeError, StoreError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\nExisting results were left as they were.\n")
         return 2
     except KeyboardInterrupt:
         stream.write(
-            "\nvasc_pipeline: interrupted. Finished runs are stored; the others resume from their last "
-            "checkpoint when the same command is run again.\n"
+            f"\nvasc_pipeline: {'terminated (SIGTERM)' if terminated else 'interrupted'}. Finished runs are "
+            "stored; the others resume from their last checkpoint when the same command is run again.\n"
         )
-        return 130
+        return 128 + signal.SIGTERM if terminated else 130
     except SweepStartError as exc:
         stream.write(
             f"vasc_pipeline: error: {exc}. Stores already created resume when the same command is run again.\n"

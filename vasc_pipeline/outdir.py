@@ -20,7 +20,14 @@ from typing import Any, Iterator
 
 from .store import RUNS_DIR, file_lock
 
-__all__ = ["LOCK_NAME", "OutputDirLocked", "output_dir_lock", "check_output_dir", "OutputDirCallback"]
+__all__ = [
+    "LOCK_NAME",
+    "OutputDirLocked",
+    "output_dir_lock",
+    "check_output_dir",
+    "sweep_in_progress",
+    "OutputDirCallback",
+]
 
 LOCK_NAME = ".vasc_pipeline.lock"
 
@@ -77,9 +84,36 @@ def output_dir_lock(output_dir: str | os.PathLike) -> Iterator[Path]:
         yield out
 
 
+def sweep_in_progress(output_dir: str | os.PathLike) -> str | None:
+    """Who holds ``output_dir``'s sweep lock (``"pid N on HOST, started T"``), or None when no sweep does.
+
+    Read-only for a directory without a lock file (none is created); the lock is tried, never waited for.
+    """
+    path = Path(output_dir) / LOCK_NAME
+    if not path.is_file():
+        return None
+    try:
+        with file_lock(path, wait=False):
+            return None
+    except BlockingIOError:
+        pass
+    except OSError:  # unreadable lock file: nothing known about a sweep
+        return None
+    try:
+        holder = json.loads(path.read_text() or "{}")
+    except (OSError, ValueError):
+        holder = {}
+    return f"pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started {holder.get('started', '?')}"
+
+
 def check_output_dir(output_dir: str | os.PathLike) -> Path:
     """Create ``output_dir`` if needed and prove it writable; OSError naming the field otherwise."""
     out = Path(output_dir)
+    if out.exists() and not out.is_dir():
+        raise OSError(
+            f"output_dir: {str(out)!r} is a file, not a directory; choose a directory for the results with "
+            "output_dir=..."
+        )
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test-{os.getpid()}"

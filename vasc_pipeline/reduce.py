@@ -28,6 +28,7 @@ import pandas as pd
 import xarray as xr
 
 from . import morphometry as _m
+from .outdir import sweep_in_progress
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .store import RUNS_DIR
@@ -243,11 +244,18 @@ def reduce(
     out = Path(output_dir)
     damaged: dict[str, str] = {}
     runs, skipped = find_runs(out, damaged)
+    sweep = sweep_in_progress(out)  # a sweep holding the output_dir: its unfinished runs are left out
     if not runs:
-        why = "".join(f"\n  left out: {why}" for why in skipped.values())
+        why = "".join(f"\n  left out: {why if path in damaged else f'{path}: {why}'}" for path, why in skipped.items())
         raise ReductionError(
-            f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; run the sweep "
-            f"first (python -m vasc_pipeline +sweep=NAME output_dir=...){why}"
+            f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; "
+            + (
+                f"a sweep is running in this output_dir ({sweep}) and none of its runs is complete yet: wait for "
+                "it (it reduces the output_dir itself once its runs are complete)"
+                if sweep
+                else "run the sweep first (python -m vasc_pipeline +sweep=NAME output_dir=...)"
+            )
+            + why
         )
     check_one_configuration(out, runs)
     summary, best, dims = build_summary(runs, output_dir=out)
@@ -292,6 +300,11 @@ def reduce(
         lines.append(f"  removed {len(result.removed)} exports and figures of trees no longer their cell's best")
     for path, why in skipped.items():
         lines.append(f"  left out: {why if path in damaged else f'{path}: {why}'}")
+    if sweep:
+        lines.append(
+            f"  a sweep is running in this output_dir ({sweep}): its unfinished runs are left out; it reduces "
+            "the output_dir again once its runs are complete"
+        )
     for stage, error in result.errors.items():
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")

@@ -83,7 +83,10 @@ def find_runs(
                 damaged[str(path)] = str(exc)
             continue
         if attrs.get("status") != STATUS_COMPLETE:
-            skipped[str(path)] = f"status {attrs.get('status')!r} (not complete)"
+            skipped[str(path)] = (
+                f"status {attrs.get('status')!r} (not complete: {attrs.get('steps_done', 0)} of "
+                f"{attrs.get('total_steps', '?')} proposed moves)"
+            )
             continue
         cost = {k: as_float((attrs.get("cost") or {}).get(k)) for k in COST_KEYS}
         if not math.isfinite(cost["total"]):

@@ -283,6 +283,8 @@ class RunStore(CheckpointsMixin):
         if config_hash(requested) == config_hash(self.group.attrs["config"]):
             return
         diff = config_differences(self.group.attrs["config"], requested)
+        if not diff:  # a store from before the input digests (identity.INPUTS): compared without them
+            return
         raise ConfigError(
             f"run {self.run_id!r} in {str(self.path)!r} was started with a different configuration, and runs "
             f"are never mixed: {'; '.join(diff) or 'config hash differs'}. Restore those settings to resume it, "
@@ -428,6 +430,10 @@ class RunStore(CheckpointsMixin):
         for key, crc in (attrs.get("checksums") or {}).items():
             if key not in arrays or crc32(arrays[key]) != crc:
                 raise StoreError(f"array {key!r} fails its CRC-32 check")
+        cost = attrs.get("cost")
+        total = cost.get("total") if isinstance(cost, Mapping) else None
+        if isinstance(total, bool) or not isinstance(total, (int, float)):
+            raise StoreError(f"its final cost attribute holds no total cost (cost={str(cost)[:80]!r})")
 
     # -- completion -------------------------------------------------------------------------
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
+from .identity import INPUTS, input_digests
 from .store import run_path
 from .tissue.shapes import mask_geometry
 
@@ -199,10 +200,14 @@ def expand(cfg: Any) -> list[Job]:
             "drop the steps axis or use method=anneal"
         )
     jobs = []
+    digests = None  # the input files' content (identity.INPUTS), read once: the grid shares them
     for n, m_b, steps, seed in itertools.product(ns, mbs, steps_axis, seeds):
         run_cfg = validate(job_config(cfg, n, m_b, seed, steps))
         rid = run_id(tissue, n, m_b, seed, steps, method)
         config = stored_config(run_cfg)
+        digests = input_digests(config) if digests is None else digests
+        if digests:
+            config[INPUTS] = dict(digests)
         coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps, "method": method}
         jobs.append(
             Job(rid, cell_id(tissue, n, m_b, steps, method), coords, config, str(run_path(run_cfg.output_dir, rid)))

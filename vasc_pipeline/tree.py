@@ -275,7 +275,32 @@ def load_terminal_sites(path: str, tissue: Tissue) -> np.ndarray:
         raise TreeError(f"terminals.path: cannot read {path!r} as x, y, z in metres: {exc}") from exc
     if len(sites) < 2:
         raise TreeError(f"terminals.path: {path!r} holds {len(sites)} sites; at least 2 are needed")
+    bad = np.flatnonzero(~np.isfinite(sites).all(axis=1))
+    if bad.size:  # before the tissue test, which would call the site "outside" (and warn)
+        raise TreeError(
+            f"terminals.path: site {bad[0]} of {path!r} is {sites[bad[0]].tolist()}: every site needs three "
+            f"finite coordinates x, y, z in metres ({bad.size} site(s) with a missing, NaN or infinite value)"
+        )
     outside = np.flatnonzero(~tissue.contains(sites))
     if outside.size:
         raise TreeError(f"terminals.path: site {outside[0]} at {sites[outside[0]].tolist()} m lies outside the tissue")
     return sites
+
+
+def check_duplicate_sites(sites: np.ndarray, path: str, fixed: bool) -> None:
+    """Terminal sites given twice (the same x, y, z): refused for fixed terminals (two terminals
+    would stay at one point), a warning otherwise (the anneal moves them apart)."""
+    import warnings
+
+    _, first, counts = np.unique(sites, axis=0, return_index=True, return_counts=True)
+    if not (counts > 1).any():
+        return
+    k = int(first[np.argmax(counts > 1)])
+    twin = int(np.flatnonzero((sites == sites[k]).all(axis=1))[1])
+    text = (
+        f"terminals.path: sites {k} and {twin} of {path!r} are the same point {sites[k].tolist()} m "
+        f"({int((counts - 1).sum())} duplicate site(s) in all)"
+    )
+    if fixed:
+        raise TreeError(f"{text}; with terminals.fixed=true they would stay at one point: remove the duplicates")
+    warnings.warn(f"{text}; the anneal moves them apart (remove the duplicates to keep every site)", stacklevel=2)

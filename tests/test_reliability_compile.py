@@ -1,0 +1,67 @@
+"""Reliability, second pass: the first run says that it compiles, and compiles once, in the
+orchestrator, every kernel its jobs use (workers then load them from numba's disk cache)."""
+
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+import time
+
+from helpers import ENV, REPO, TINY_RUN
+
+from vasc_pipeline import orchestrate
+
+# In a fresh process: warm up for the jobs of a sweep on `anneal=fast` (the default preset: a
+# calibrated T_start, adapted steps, a coarse exclusion map), then run one of those jobs, and list
+# every kernel that got a signature only during the run (compiled, or loaded, by the job itself).
+_SCRIPT = """
+import json, sys
+import vasc_pipeline
+from numba.core.registry import CPUDispatcher
+from vasc_pipeline import config, engine, orchestrate, sweep
+import importlib, pkgutil
+jobs = sweep.expand(config.compose(json.loads(sys.argv[1])))
+orchestrate.compile_kernels(jobs)
+mods = [importlib.import_module("vasc_pipeline." + m.name) for m in pkgutil.iter_modules(vasc_pipeline.__path__)
+        if m.name != "__main__"]
+def signatures():
+    return {f"{m.__name__}.{k}": len(v.signatures) for m in mods for k, v in vars(m).items()
+            if isinstance(v, CPUDispatcher)}
+before = signatures()
+engine.run(jobs[-1].config, seed=jobs[-1].coords["seed"])
+print(json.dumps(sorted(k for k, n in signatures().items() if n > before.get(k, 0))))
+"""
+
+
+def test_the_warm_up_compiles_every_kernel_the_jobs_use():
+    overrides = [*TINY_RUN, "anneal=fast", "anneal.steps=3000", "+sweep=single", "sweep.seeds=[0,1]"]
+    # first time on a cold cache this compiles the kernels (minutes on a busy machine): bounded, not timed
+    out = subprocess.run(
+        [sys.executable, "-c", _SCRIPT, json.dumps(overrides)],
+        env=ENV,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.splitlines()[-1]) == [], "kernels left for the workers to compile"
+
+
+def test_a_slow_compilation_is_announced_while_it_happens(monkeypatch):
+    monkeypatch.setattr(orchestrate, "COMPILE_NOTICE_AFTER", 0.05)
+    monkeypatch.setattr(orchestrate, "_warm_up", lambda jobs: time.sleep(1.0))
+    log = io.StringIO()
+    orchestrate.compile_kernels(["a job"], log)
+    lines = log.getvalue().splitlines()
+    assert lines[0].startswith("vasc_pipeline: compiling the numba kernels (first run only"), lines
+    assert lines[1].startswith("vasc_pipeline: kernels compiled in "), lines
+
+
+def test_loading_the_cached_kernels_says_nothing(monkeypatch):
+    monkeypatch.setattr(orchestrate, "_warm_up", lambda jobs: None)
+    log = io.StringIO()
+    orchestrate.compile_kernels(["a job"], log)
+    assert log.getvalue() == ""

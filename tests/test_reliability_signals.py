@@ -1,0 +1,26 @@
+"""Reliability, second pass: SIGTERM ends a sweep as Ctrl-C does, saying so (exit 143)."""
+
+from __future__ import annotations
+
+import signal
+import time
+
+from helpers import TIMEOUT, TINY_RUN, cli, finish
+
+
+def test_sigterm_ends_the_sweep_with_a_message(tmp_path):
+    proc = cli(*TINY_RUN, "anneal.steps=200000000", "anneal.trace_every=100000", f"output_dir={tmp_path}")
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while not list(tmp_path.glob("runs/*.zarr/zarr.json")):  # the sweep is past planning
+            assert time.monotonic() < deadline and proc.poll() is None, "no store was created"
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)
+        code, output = finish(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == 143, output
+    assert "vasc_pipeline: terminated (SIGTERM). Finished runs are stored" in output, output
+    assert "Traceback" not in output, output
