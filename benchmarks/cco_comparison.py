@@ -49,8 +49,8 @@ ARTERIES = ("RCA", "LAD", "LCX")
 
 
 def tree_measures(parent, position, radius, kind, gamma) -> dict:
-    from vasc_pipeline.morphometry import compare_with_kassab, morphometry
-    from vasc_pipeline.similarity import main_trunks, resample_polyline
+    from vasc_pipeline.reduce.morphometry import compare_with_kassab, morphometry
+    from vasc_pipeline.reduce.similarity import main_trunks, resample_polyline
 
     ds = morphometry(parent, position, radius, kind).sel(scheme="diameter_defined")
     orders = [int(o) for o in ds.order.values]
@@ -71,8 +71,8 @@ def tree_measures(parent, position, radius, kind, gamma) -> dict:
 
 
 def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, wall: float, **extra) -> dict:
-    from vasc_pipeline.costs import vascular_exclusion_cost
     from vasc_pipeline.engine import node_radii
+    from vasc_pipeline.model.costs import vascular_exclusion_cost
 
     m = tree_measures(
         tree.parent,
@@ -170,7 +170,7 @@ def _fmt(mean: float, se: float, scale: float = 1.0, digits: int = 4) -> str:
 
 
 def summarise(rows: list[dict]) -> dict:
-    from vasc_pipeline.similarity import trunk_spread
+    from vasc_pipeline.reduce.similarity import trunk_spread
 
     tables = {"energy": [], "asymmetry": [], "order": [], "kassab": []}
     for n in sorted({r["n"] for r in rows}):
@@ -262,7 +262,7 @@ def speed(ns: list[int], repeats: int, extra: list[str]) -> list[dict]:
         problem = engine.build_problem(config.compose([*TISSUE, f"n_terminals={n}", "method=cco", *extra]))
         cco.grow_tree(problem, np.array([1, 2, 3, 4], dtype=np.uint64))  # compile (cached) outside the timing
         for seed in range(repeats):
-            from vasc_pipeline.rng import seed_state
+            from vasc_pipeline.model.rng import seed_state
 
             t0, c0 = time.perf_counter(), time.process_time()
             tree, _, drawn, _ = cco.grow_tree(problem, seed_state(seed))

@@ -9,7 +9,7 @@ level):
   orders present in both, trunk = 11 (the reduction's alignment), and the same with the
   terminal order placed on Kassab's order of nearest diameter (``..._terminal_aligned_...``);
 - the same errors and ``n_orders`` under the confluence reading of the ordering
-  (``..._confluence_...``; :mod:`vasc_pipeline.ordering`: orders never decrease toward the root);
+  (``..._confluence_...``; :mod:`vasc_pipeline.reduce.ordering`: orders never decrease toward the root);
 - ``n_orders``, ``diameter_ratio_per_order`` (10^slope of log10 element diameter against
   order; Kassab's LAD, orders 5-11: 1.91) and per order the element count, segments per
   element, mean diameter and length (``orders``);
@@ -52,7 +52,7 @@ def diameter_ratio_per_order(orders, diameters) -> float:
 
 
 def kassab_ratio() -> float:
-    from vasc_pipeline.reference import kassab_dataset
+    from vasc_pipeline.reduce.reference import kassab_dataset
 
     lad = kassab_dataset().sel(artery="LAD", level="element")
     return diameter_ratio_per_order(lad.order.values[KASSAB_FIT_ORDERS], lad.D_mean.values[KASSAB_FIT_ORDERS])
@@ -113,7 +113,7 @@ def placement_row(tissue, tree: dict) -> dict:
     """Where the branch points sit: the share of bifurcations outside the exclusion domain
     (the heart and its cavities), their median distance from it, and the terminal segments'
     median length: all of them, and those hanging from a bifurcation outside."""
-    from vasc_pipeline.tree import KIND_BIFURCATION, KIND_TERMINAL
+    from vasc_pipeline.model.tree import KIND_BIFURCATION, KIND_TERMINAL
 
     kind, position, parent = tree["kind"], tree["position"], tree["parent"]
     up = np.maximum(parent, 0)  # parent -1 (inlets) maps to node 0; only rows of terminals are read
@@ -175,7 +175,7 @@ def row_of(path: Path, root: Path) -> dict:
     row["min_segment_length"] = float(morph.attrs["min_segment_length"])  # m; rows before 2026-11-24: 1e-9
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
     row.update(morphometry_row(morph))
-    # the other reading of Jiang's reassignment (vasc_pipeline.ordering): orders monotone toward the root
+    # the other reading of Jiang's reassignment (vasc_pipeline.reduce.ordering): orders monotone toward the root
     confluence = morphometry_row(
         morphometry.morphometry(parent, tree["position"], tree["radius"], kind, reading="confluence")
     )

@@ -1,7 +1,7 @@
 """Time to quality on the heart: wall time, moves per second and final quality per run.
 
 For every requested N, schedule (an ``anneal=`` preset), budget and seed, one run of the
-heart (default tissue and physics) is grown as a pipeline job (:func:`vasc_pipeline.job.run_job`
+heart (default tissue and physics) is grown as a pipeline job (:func:`vasc_pipeline.pipeline.job.run_job`
 in a process pool, one core per run): checkpointed every minute, so an interrupted
 benchmark resumes where it stopped, even in the middle of a long run, when the same
 command is given again. Runs of schedule S at budget B live in ``--out/S/xB/runs/``.
@@ -12,7 +12,8 @@ default), ``steps``, ``seed``, ``wall_seconds`` (all sessions of the run, buildi
 problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, voxels),
 ``cost_vascular`` (C_v + C_w + A_o/A_wv C_o, W) and its parts ``cost_volume``, ``cost_power``,
 ``cost_exclusion_weighted`` (W), ``cost_total`` (the annealed C), ``cavity_share``, each inlet's
-share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the morphometry against Kassab 1993 (diameter-defined Strahler,
+share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the
+morphometry against Kassab 1993 (diameter-defined Strahler,
 element level, orders shifted to 11): ``diameter_error_<artery>`` and
 ``length_error_<artery>`` (mean |log10 model/Kassab| over the orders present in both),
 the same with the terminal order aligned on Kassab's order of nearest diameter
@@ -84,7 +85,7 @@ def run_one(j) -> str:
 def terminal_aligned(morph):
     """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest mean element
     diameter instead of its trunk on order 11 (the fidelity issue's alternative), and the shift."""
-    from vasc_pipeline.reference import kassab_dataset
+    from vasc_pipeline.reduce.reference import kassab_dataset
 
     dds = morph.sel(scheme="diameter_defined")
     lowest = int(dds.order.values[(dds.element_count > 0).values].min())
@@ -123,7 +124,7 @@ def morphometry_row(morph) -> dict:
 def row_of(store_path: str, schedule: str, budget: float) -> dict:
     """The benchmark's row of a complete run store."""
     from vasc_pipeline import morphometry
-    from vasc_pipeline.costs import vascular_exclusion_cost
+    from vasc_pipeline.model.costs import vascular_exclusion_cost
     from vasc_pipeline.store import RunStore
 
     store = RunStore.open(store_path, mode="r")

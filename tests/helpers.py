@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vasc_pipeline import config, costs, engine, job, kernel, sweep
-from vasc_pipeline.tree import check_tree
+from vasc_pipeline.model.tree import check_tree
 
 
 def make_problem(*overrides: str):

@@ -13,7 +13,7 @@ from helpers import (
 
 from vasc_pipeline import engine, kernel
 from vasc_pipeline.config import ConfigError, compose, to_run_config, validate
-from vasc_pipeline.tree import KIND_BIFURCATION
+from vasc_pipeline.model.tree import KIND_BIFURCATION
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")
 

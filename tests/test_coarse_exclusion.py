@@ -15,7 +15,7 @@ from helpers import (
 
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.tissue import ExclusionGrid
+from vasc_pipeline.model.tissue import ExclusionGrid
 
 COARSE = ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_phase=0.4")
 

@@ -7,8 +7,10 @@ import pytest
 from helpers import assert_running_equals_full, make_problem
 from scipy.optimize import minimize
 
-from vasc_pipeline import engine, finish, geometry, kernel, topology_search
-from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
+from vasc_pipeline import engine, kernel
+from vasc_pipeline.engine import polish as finish
+from vasc_pipeline.model import geometry, topology_search
+from vasc_pipeline.model.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 # --------------------------------------------------------------------------------------
 # Helpers

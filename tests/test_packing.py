@@ -1,4 +1,4 @@
-"""The packing phase (vasc_pipeline.packing): kernel against its NumPy twin, the end of the
+"""The packing phase (vasc_pipeline.kernel.packing): kernel against its NumPy twin, the end of the
 phase, determinism across block splits, checkpoints and a SIGKILL, and bad input."""
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from helpers import (
     make_problem,
 )
 
-from vasc_pipeline import config, engine, kernel, packing
+from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.kernel import packing
 
 PACKED = (
     "tissue=sphere",

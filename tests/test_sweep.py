@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 from helpers import TINY_RUN, cli, finish
 
-from vasc_pipeline import config, orchestrate, store, sweep
+from vasc_pipeline import config, store, sweep
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.pipeline import orchestrate
 
 SWEEPS = sorted(p.stem for p in (config.CONFIG_DIR / "sweep").glob("*.yaml"))
 

@@ -1,7 +1,7 @@
 """Figures of a reduced sweep (matplotlib, Agg backend, PNG into ``<output_dir>/figures/``).
 
 :func:`make_figures` draws everything from the summary DataTree of
-:mod:`vasc_pipeline.summary` (and, for the tree pictures, the best runs' stores)::
+:mod:`vasc_pipeline.reduce.summary` (and, for the tree pictures, the best runs' stores)::
 
     import xarray as xr
     from vasc_pipeline.figures import make_figures
@@ -65,11 +65,11 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
     Parameters
     ----------
     summary : xarray.DataTree
-        From :func:`vasc_pipeline.summary.build_summary` or ``xarray.open_datatree(summary.zarr)``.
+        From :func:`vasc_pipeline.reduce.summary.build_summary` or ``xarray.open_datatree(summary.zarr)``.
     output_dir : path
         The sweep's output directory (the tree pictures read ``runs/<run_id>.zarr``).
     """
-    from ..store import run_path
+    from ..store.run_store import run_path
 
     out = Path(output_dir) / FIGURES_DIR
     paths = []

@@ -1,0 +1,92 @@
+"""A run's identity: the part of its config that determines its result, and how two configs differ in it.
+
+:func:`config_hash` (stored as ``attrs["config_hash"]``) and :func:`config_differences` read
+only what changes a run's result (:func:`hashed_config`); :func:`identity_differences` is what
+keeps two runs out of one output_dir: every difference but the sweep axes (:data:`SWEEP_AXES`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Any, Mapping
+
+from .schema import KEYS_ADDED_LATER
+
+__all__ = ["hashed_config", "config_hash", "config_differences", "identity_differences", "SWEEP_AXES"]
+
+# Config sections that do not change a run's result: where it is written, how often it
+# checkpoints, and how the sweep/cluster around it is organised. Everything else does.
+_UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
+# The sweep axes (flattened config keys): the only settings in which the runs of one output_dir
+# may differ; everything else in it is one configuration (a cell is never a mix of physics).
+SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")
+
+
+def hashed_config(config: Mapping[str, Any]) -> dict:
+    """The part of a run config that determines its result (see ``_UNHASHED``).
+
+    Keys added to the schema later (:data:`vasc_pipeline.config.KEYS_ADDED_LATER`) are left
+    out where they hold the value that reproduces the older code, so stores written before
+    they existed keep their identity.
+    """
+    out = {k: v for k, v in config.items() if k not in _UNHASHED}
+    for dotted, neutral in KEYS_ADDED_LATER.items():
+        *parents, leaf = dotted.split(".")
+        node = out
+        for name in parents:
+            node = node.get(name) if isinstance(node, Mapping) else None
+        if isinstance(node, Mapping) and leaf in node and node[leaf] == neutral:
+            node = out
+            for name in parents:  # copy the path before removing, the caller's config stays intact
+                node[name] = dict(node[name])
+                node = node[name]
+            del node[leaf]
+    return out
+
+
+def config_hash(config: Mapping[str, Any]) -> str:
+    """SHA-256 of the result-determining config, canonical JSON (sorted keys)."""
+    text = json.dumps(hashed_config(config), sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(tree, Mapping):
+        out: dict[str, Any] = {}
+        for k, v in tree.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: tree}
+
+
+def config_differences(
+    stored: Mapping[str, Any], requested: Mapping[str, Any], ignore: tuple[str, ...] = ()
+) -> list[str]:
+    """Human-readable ``key: stored -> requested`` lines for every result-determining difference
+    (flattened keys in ``ignore``, e.g. :data:`SWEEP_AXES`, are not compared)."""
+    a, b = _flatten(hashed_config(stored)), _flatten(hashed_config(requested))
+
+    def ignored(key: str) -> bool:  # an entry ending in "." ignores a whole section
+        return any(key == i or (i.endswith(".") and key.startswith(i)) for i in ignore)
+
+    return [
+        f"{k}: {a.get(k, '<absent>')!r} (stored) vs {b.get(k, '<absent>')!r} (requested)"
+        for k in sorted(set(a) | set(b))
+        if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")
+    ]
+
+
+def _method(config: Mapping[str, Any]) -> str:
+    return str((config.get("method") or {}).get("name") or "anneal")
+
+
+def identity_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
+    """What keeps two runs out of one output_dir: every difference but the sweep axes.
+
+    Runs of different methods (``method=cco`` beside the anneal: the comparison the
+    reduction's ``method`` dimension is for) share everything but the sections only one of
+    them uses, ``anneal`` and ``method``.
+    """
+    ignore = SWEEP_AXES + (("anneal.", "method.") if _method(stored) != _method(requested) else ())
+    return config_differences(stored, requested, ignore=ignore)
