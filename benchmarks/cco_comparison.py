@@ -1,4 +1,4 @@
-"""CCO against the anneal on the same terminal sites, tissue and cost (issue 15).
+"""CCO against the anneal on the same terminal sites, tissue and cost.
 
 For every N: CCO grows a tree on the heart from random sites (seed 0, Schreiner's distance
 criterion); its N sites are written to ``sites_N<N>.csv``. On that one site set:
@@ -37,11 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
+from vasc_pipeline.reduce.reference import ARTERIES
+
 TISSUE = ["tissue=heart"]
 # heart: the paper's cost, so the anneal also weighs exclusion (A_o = 100), which CCO's
 # growth does not see; heart_no_exclusion: A_o = 0, so both minimise the same C_v + C_w.
 CASES = {"heart": [], "heart_no_exclusion": ["physics.A_o=0"]}
-ARTERIES = ("RCA", "LAD", "LCX")
 
 
 # --------------------------------------------------------------------------------------------
@@ -72,7 +73,7 @@ def tree_measures(parent, position, radius, kind, gamma) -> dict:
 
 def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, wall: float, **extra) -> dict:
     from vasc_pipeline.engine import node_radii
-    from vasc_pipeline.model.costs import vascular_exclusion_cost
+    from vasc_pipeline.model.costs import vascular_cost, vascular_exclusion_cost
 
     m = tree_measures(
         tree.parent,
@@ -85,7 +86,7 @@ def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, w
         "method": kind,
         "n": n,
         "seed": seed,
-        "vascular": costs["volume"] + costs["power"],
+        "vascular": vascular_cost(costs),
         "exclusion_scaled": w_o * costs["exclusion"],
         "vascular_exclusion": vascular_exclusion_cost(costs, w_o),
         "wall_seconds": wall,

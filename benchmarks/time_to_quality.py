@@ -44,7 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-ARTERIES = ("RCA", "LAD", "LCX")
+from vasc_pipeline.reduce.fidelity import inlet_shares, terminal_aligned
+from vasc_pipeline.reduce.reference import ARTERIES
+
 DEFAULT_SIZES = [500, 1000, 2000]
 LARGE_SIZES = [4000, 6000]
 
@@ -80,19 +82,6 @@ def run_one(j) -> str:
 
     job.run_job(j)
     return j.store
-
-
-def terminal_aligned(morph):
-    """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest mean element
-    diameter instead of its trunk on order 11 (the fidelity issue's alternative), and the shift."""
-    from vasc_pipeline.reduce.reference import kassab_dataset
-
-    dds = morph.sel(scheme="diameter_defined")
-    lowest = int(dds.order.values[(dds.element_count > 0).values].min())
-    lad = kassab_dataset().sel(artery="LAD", level="element")
-    d_low = float(dds.element_diameter_mean.sel(order=lowest))
-    shift = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))]) - lowest
-    return morph.assign_coords(order=morph.order + shift), shift
 
 
 def morphometry_row(morph) -> dict:
@@ -148,10 +137,8 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
         "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
     }
     tree = store.read_tree()
-    inlet_of = morphometry.inlet_of(tree["parent"])
-    terminals = inlet_of[tree["kind"] == 2]
-    for name, inlet in zip(store.group["tissue"].attrs["inlet_names"], np.flatnonzero(tree["parent"] < 0)):
-        row[f"terminal_share_{name}"] = float(np.mean(terminals == inlet))  # ~0: an abandoned artery
+    for name, share in inlet_shares(tree["parent"], tree["kind"], store.group["tissue"].attrs["inlet_names"]).items():
+        row[f"terminal_share_{name}"] = share  # ~0: an abandoned artery
     row.update(morphometry_row(morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
     row["store"] = store_path
     return row

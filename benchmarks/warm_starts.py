@@ -1,4 +1,4 @@
-"""Warm starts against the plain anneal at equal moves, on the heart (issue 12, deliverable 2).
+"""Warm starts against the plain anneal at equal moves, on the heart.
 
 Each strategy spends the same number of proposals, ``--budget`` times the default of
 ``anneal=fast`` at N, and ends with the same polish:

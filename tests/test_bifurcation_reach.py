@@ -1,4 +1,4 @@
-"""``tissue.bifurcation_reach``: bifurcations kept within a distance of the exclusion domain (issue 13)."""
+"""``tissue.bifurcation_reach``: bifurcations kept within a distance of the exclusion domain."""
 
 from __future__ import annotations
 

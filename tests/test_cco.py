@@ -290,6 +290,7 @@ def test_anneal_init_cco_starts_from_the_cco_tree():
 # The pipeline: run stores, resume, reduction with both methods
 
 
+@pytest.mark.integration
 def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     out = tmp_path / "both"
     grid = [
@@ -352,6 +353,7 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
 # The benchmark cannot rot
 
 
+@pytest.mark.integration
 def test_comparison_benchmark_quick(tmp_path):
     proc = subprocess.run(
         [

@@ -218,7 +218,7 @@ def test_exclude_cavities_false_is_the_myocardium_only_model(tissue1000):
 
 
 def test_large_vessels_stay_out_of_the_cavities_after_a_fixed_seed_anneal():
-    """N = 200, seed 0, the default schedule: the cavity share is ~0 (the fidelity issue's
+    """N = 200, seed 0, the default schedule: the cavity share is ~0 (the fidelity work's
     target is < 0.5 %); with the myocardium-only map the same run puts ~30 % in the cavities."""
     from vasc_pipeline import config, engine
     from vasc_pipeline.model.costs import cavity_share

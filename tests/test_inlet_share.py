@@ -1,4 +1,4 @@
-"""``tissue.inlet_share`` and ``tissue.inlet_assignment``: which terminals each inlet feeds (issue 13)."""
+"""``tissue.inlet_share`` and ``tissue.inlet_assignment``: which terminals each inlet feeds."""
 
 from __future__ import annotations
 

@@ -15,8 +15,6 @@ PACKAGE = Path(vasc_pipeline.__file__).parent
 MAX_LINES = 700
 MAX_TOP_LEVEL = 12
 
-pytestmark = pytest.mark.unit
-
 
 def modules() -> dict[str, Path]:
     """Every module of the package by dotted name (a package by its ``__init__``)."""
@@ -152,3 +150,33 @@ def test_the_readme_api_imports():
         export.export_run,
     ):
         assert callable(fn)
+
+
+def top_level_definitions(path: Path) -> set[str]:
+    """The public names a module defines itself (functions, classes, assignments)."""
+    names = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign):
+            names.update(x.id for t in node.targets for x in ast.walk(t) if isinstance(x, ast.Name))
+    return {n for n in names if not n.startswith("_")}
+
+
+@pytest.mark.parametrize(
+    "package, modules",
+    [
+        ("config", ["schema"]),
+        ("engine", ["problem", "run"]),
+        ("store", ["run_store"]),
+        ("reduce", ["stage"]),
+        ("kernel", ["state", "schedule", "exclusion", "supply", "pressure", "cells", "moves", "loop"]),
+    ],
+)
+def test_a_former_module_s_names_are_on_its_package(package, modules):
+    """config.py, engine.py, store.py, reduce.py and kernel.py became packages: every public name
+    those modules defined is still an attribute of the package."""
+    pkg = importlib.import_module(f"vasc_pipeline.{package}")
+    for module in modules:
+        missing = top_level_definitions(PACKAGE / package / f"{module}.py") - set(dir(pkg))
+        assert not missing, (module, sorted(missing))

@@ -30,6 +30,8 @@ from vasc_pipeline import config, engine, job, store, sweep
 from vasc_pipeline.model.tree import Tree, check_tree
 from vasc_pipeline.pipeline import orchestrate
 
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
+
 SMALL = [
     "+sweep=smoke",
     "sweep.n_terminals=[16,24]",

@@ -28,6 +28,8 @@ from vasc_pipeline.pipeline import orchestrate
 from vasc_pipeline.reduce.reference import kassab_csv_path
 from vasc_pipeline.reduce.summary import write_summary
 
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
+
 REPO = Path(__file__).resolve().parents[1]
 GRID = [
     "+sweep=smoke",

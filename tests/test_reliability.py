@@ -29,6 +29,8 @@ from vasc_pipeline.model.tissue import TissueError
 from vasc_pipeline.pipeline import orchestrate
 from vasc_pipeline.pipeline.cluster import walltime_seconds, worker_lifetime
 
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
+
 THREE_SEEDS = ["+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1,2]"]
 
 

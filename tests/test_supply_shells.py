@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import assert_block_splits_bit_identical, assert_running_equals_full, make_problem
+from helpers import FAST_2026_12, assert_block_splits_bit_identical, assert_running_equals_full, make_problem
 
 from vasc_pipeline import costs, engine, kernel
 
@@ -124,8 +124,8 @@ def test_shell_change_on_exact_ties():
 
 
 def _late_problem(*overrides):
-    """A short `fast` run whose adapted terminal steps fall below the shells' width."""
-    return make_problem(*overrides, "anneal=fast", "anneal.steps=300000")
+    """A short run on FAST_2026_12 whose adapted terminal steps fall below the shells' width."""
+    return make_problem(*overrides, *FAST_2026_12, "anneal.steps=300000")
 
 
 @pytest.mark.parametrize(

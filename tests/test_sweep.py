@@ -54,6 +54,7 @@ def test_sweep_axes_without_a_sweep_run_the_base_config_on_them(tmp_path):
         sweep.expand(config.compose(["sweep.seeds=[]"]))
 
 
+@pytest.mark.integration
 def test_the_command_takes_sweep_axes_without_a_sweep(tmp_path):
     """The README's ``sweep.seeds=[...]`` example as a user types it (a dry run: nothing runs)."""
     code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "sweep.seeds=[0,1]", "cluster.dry_run=true"))

@@ -3,7 +3,7 @@
 A finished sweep is reduced (summary.zarr, figures, trees); ``+stage=reduce
 output_dir=...`` only reduces the complete runs already there.
 
-Thin on purpose (SPEC section 8): Hydra composes the config, and
+Thin on purpose (everything it does is a plain function a test can call): Hydra composes the config, and
 :func:`vasc_pipeline.pipeline.orchestrate.main` (a plain function that tests call directly) does
 the rest and returns the exit status.
 """

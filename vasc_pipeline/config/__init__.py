@@ -7,11 +7,18 @@ and :func:`compose`; :mod:`~vasc_pipeline.config.pipeline`: the sweep and cluste
 
 from . import schema as _schema
 from .schema import *  # noqa: F403
-from .schema import (  # names callers used from the former config module, outside its __all__
+from .schema import (  # the former config module's other names, outside its __all__
+    ANNEAL_INITS,
+    INLET_ASSIGNMENTS,
+    MAX_CALIBRATION_SAMPLES,
+    MAX_CHECKPOINT_SECONDS,
+    MAX_COARSE_EXCLUSION_FACTOR,
     MAX_STEPS,
+    PAPER_STEPS_AT_1000,
     SEED_ACCEPTED,
     SINGLE_SWEEP,
     STAGES,
+    TISSUE_KEYS_OF_EVERY_TISSUE,
     hydra_error_message,
     register_schema,
     seed_ok,
@@ -20,6 +27,13 @@ from .schema import (  # names callers used from the former config module, outsi
 
 __all__ = [
     *_schema.__all__,
+    "ANNEAL_INITS",
+    "INLET_ASSIGNMENTS",
+    "MAX_CALIBRATION_SAMPLES",
+    "MAX_CHECKPOINT_SECONDS",
+    "MAX_COARSE_EXCLUSION_FACTOR",
+    "PAPER_STEPS_AT_1000",
+    "TISSUE_KEYS_OF_EVERY_TISSUE",
     "MAX_STEPS",
     "SEED_ACCEPTED",
     "SINGLE_SWEEP",

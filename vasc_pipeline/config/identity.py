@@ -3,17 +3,26 @@
 :func:`config_hash` (stored as ``attrs["config_hash"]``) and :func:`config_differences` read
 only what changes a run's result (:func:`hashed_config`); :func:`identity_differences` is what
 keeps two runs out of one output_dir: every difference but the sweep axes (:data:`SWEEP_AXES`).
+:func:`mixed_configuration` applies that rule to the runs of an output_dir (the planner before
+a sweep, the reduction before it reduces).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 from .schema import KEYS_ADDED_LATER
 
-__all__ = ["hashed_config", "config_hash", "config_differences", "identity_differences", "SWEEP_AXES"]
+__all__ = [
+    "hashed_config",
+    "config_hash",
+    "config_differences",
+    "identity_differences",
+    "mixed_configuration",
+    "SWEEP_AXES",
+]
 
 # Config sections that do not change a run's result: where it is written, how often it
 # checkpoints, and how the sweep/cluster around it is organised. Everything else does.
@@ -90,3 +99,43 @@ def identity_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]
     """
     ignore = SWEEP_AXES + (("anneal.", "method.") if _method(stored) != _method(requested) else ())
     return config_differences(stored, requested, ignore=ignore)
+
+
+def mixed_configuration(
+    runs: Iterable[tuple[str, Mapping[str, Any], str | None, int]],
+    reference: Mapping[str, Any] | None = None,
+    cell_steps: Mapping[str, int] | None = None,
+) -> list[tuple[str, list[str], tuple[str, int, int, str] | None]]:
+    """The runs that break "one configuration per output_dir".
+
+    The runs of an output_dir share their configuration except the sweep axes
+    (:func:`identity_differences`), and the runs of one cell (grid point without the seed)
+    share their number of proposed moves: otherwise the reduction's best seed of a cell would
+    be picked across different physics or schedules.
+
+    Parameters
+    ----------
+    runs : (name, config, cell id or None, proposed moves) per run
+    reference : the configuration every run must share (default: the first run's)
+    cell_steps : the proposed moves each cell must have (default: its first run's)
+
+    Returns
+    -------
+    Per offending run, in order: (name, config differences, ``(cell, steps, the cell's steps,
+    whose: the name of the cell's first run, or "requested")`` or None).
+    """
+    runs = list(runs)
+    if reference is None:
+        reference = runs[0][1] if runs else {}
+    steps_of = dict(cell_steps or {})
+    whose = dict.fromkeys(steps_of, "requested")
+    out = []
+    for name, config, cell, steps in runs:
+        if cell_steps is None and cell is not None:
+            whose.setdefault(cell, name)
+            steps_of.setdefault(cell, steps)
+        clash = (cell, steps, steps_of[cell], whose[cell]) if cell in steps_of and steps != steps_of[cell] else None
+        differences = identity_differences(config, reference)
+        if differences or clash:
+            out.append((name, differences, clash))
+    return out

@@ -106,7 +106,7 @@ class ConfigError(ValueError):
 @dataclass
 class TissueConfig:
     name: str = "heart"
-    voxel_size: Optional[float] = None  # m; None: R_supply / 4 (SPEC section 3)
+    voxel_size: Optional[float] = None  # m; None: R_supply / 4 (~270 voxels per supply sphere)
     # The grid the exclusion term is summed on, m, fixed whatever N (its D and L are in its
     # voxels); None: the supply grid above (whose voxel follows N unless voxel_size is set).
     exclusion_voxel_size: Optional[float] = None
@@ -131,11 +131,11 @@ class TissueConfig:
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
-    # Which terminals of the initial tree each inlet feeds: "random" (SPEC section 2), or
+    # Which terminals of the initial tree each inlet feeds: "random" (the paper's), or
     # "nearest" (by distance to the inlets, keeping inlet_share's counts when it is set).
     inlet_assignment: str = "random"
     # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
-    # heart); None: anywhere in the voxel grid's box (SPEC section 2).
+    # heart); None: anywhere in the voxel grid's box (the paper).
     bifurcation_reach: Optional[float] = None
 
 
@@ -196,7 +196,7 @@ class AnnealConfig:
     polish: bool = False  # optimise the final topology's bifurcation positions (finish.polish)
     polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (finish.descend_swaps)
     trace_every: int = 100_000  # steps between trace records
-    init: str = "random"  # initial tree: "random" (SPEC) or "cco" (vasc_pipeline.engine.cco, method.* settings)
+    init: str = "random"  # initial tree: "random" (the paper's) or "cco" (vasc_pipeline.engine.cco, method.* settings)
 
 
 @dataclass

@@ -15,5 +15,6 @@ from . import run as _run
 from .problem import *  # noqa: F403
 from .problem import scheduled_T_end, seed_state
 from .run import *  # noqa: F403
+from .run import accepted_moves
 
-__all__ = [*_problem.__all__, *_run.__all__, "scheduled_T_end", "seed_state"]
+__all__ = [*_problem.__all__, *_run.__all__, "scheduled_T_end", "seed_state", "accepted_moves"]

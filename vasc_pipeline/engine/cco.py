@@ -41,10 +41,10 @@ function of (config, seed).
 
 Usable without Hydra or Dask::
 
-    from vasc_pipeline import cco, config, engine
+    from vasc_pipeline import cco, config, costs, engine
     problem = engine.build_problem(config.compose(["method=cco", "tissue=plane2d"]))
     result = cco.grow(problem, seed=0)
-    result.tree, result.costs["volume"] + result.costs["power"]
+    result.tree, costs.vascular_cost(result.costs)
 """
 
 from __future__ import annotations

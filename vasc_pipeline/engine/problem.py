@@ -216,7 +216,7 @@ def supply_dtype(n_terminals: int) -> type:
 def initial_state(problem: Problem, seed: int) -> kernel.State:
     """The initial tree of (config, seed) with its caches, running sums and schedule filled.
 
-    The tree is random (SPEC section 2), or with ``anneal.init=cco`` the CCO tree of
+    The tree is random (:func:`vasc_pipeline.model.tree.random_tree`), or with ``anneal.init=cco`` the CCO tree of
     :func:`vasc_pipeline.engine.cco.grow_tree` drawn from the run's generator.
 
     Temperatures left unset in the config (``anneal.T_start`` / ``anneal.T_end`` = None)

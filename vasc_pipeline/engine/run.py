@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import kernel
 from ..kernel import packing
-from ..model.costs import COST_TERMS, full_costs
+from ..model.costs import COST_TERMS, full_costs, vascular_cost
 from ..model.tree import Tree
 from ..store.run_store import TRACE_FIELDS
 from .polish import descend_swaps, polish
@@ -156,8 +156,8 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
             "swaps": swaps,
             "total_before": result["before"]["total"],
             "total_after": after["total"],
-            "vascular_before": result["before"]["volume"] + result["before"]["power"],
-            "vascular_after": after["volume"] + after["power"],
+            "vascular_before": vascular_cost(result["before"]),
+            "vascular_after": vascular_cost(after),
         }
     return report
 

@@ -151,7 +151,7 @@ def plot_consistency(summary, output_dir, path, max_seeds: int = 4) -> Path | No
     trunks, :mod:`vasc_pipeline.reduce.similarity`), the number that says how alike the trees are.
     Drawn for a sweep with a steps axis and two or more seeds; the x-y projection only.
     """
-    from ..store.run_store import run_path
+    from ..store.layout import run_path
 
     costs = summary["costs"].to_dataset()
     dims = cell_dims(summary)

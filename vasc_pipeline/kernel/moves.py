@@ -412,7 +412,7 @@ def swap_random(model, state, temp):
 
 @jit_norc
 def swap_nodes(model, state, a, b, temp):
-    """Propose hanging a where b hangs and b where a hangs (SPEC section 2).
+    """Propose hanging a where b hangs and b where a hangs (a swap of two subtrees).
 
     Siblings, and pairs where one is an ancestor of the other, are ILLEGAL. Returns
     ILLEGAL, REJECTED or ACCEPTED.

@@ -1,8 +1,9 @@
 """Full (non-incremental) evaluation of every cost term, in plain NumPy.
 
 This is the reference the numba kernel's incremental running sums are checked against
-(SPEC section 2): it shares no code with :mod:`vasc_pipeline.kernel`. Terms follow the
-SPEC's definitions; the voxel traversal here is the "all plane crossings, sorted" form of
+(the tests compare them after every kind of move): it shares no code with
+:mod:`vasc_pipeline.kernel`. Terms follow Keelan, Chung & Hague's definitions; the voxel
+traversal here is the "all plane crossings, sorted" form of
 Amanatides-Woo, the supply map a brute-force distance test per terminal.
 """
 
@@ -20,6 +21,7 @@ from .tree import Tree
 
 __all__ = [
     "COST_TERMS",
+    "COST_TERM_LABELS",
     "ActiveTerms",
     "active_terms",
     "segment_lengths",
@@ -32,9 +34,19 @@ __all__ = [
     "node_pressures",
     "full_costs",
     "total_cost",
+    "vascular_cost",
+    "vascular_exclusion_cost",
 ]
 
-COST_TERMS = ("volume", "power", "supply", "exclusion", "pressure")
+COST_TERMS = ("volume", "power", "supply", "exclusion", "pressure")  # the one list: kernel sums, trace, stores
+# Per term of COST_TERMS: units and long name (the run store's trace labels).
+COST_TERM_LABELS = {
+    "volume": ("W", "C_v, metabolic cost of blood volume"),
+    "power": ("W", "C_w, pumping power"),
+    "supply": ("1", "C_s, supply cost (voxel count score)"),
+    "exclusion": ("m2", "C_o, large-vessel exclusion cost"),
+    "pressure": ("Pa2", "C_p, terminal pressure cost"),
+}
 
 
 class ActiveTerms(tuple):
@@ -212,15 +224,21 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
     return out
 
 
+def vascular_cost(terms: dict[str, float]) -> float:
+    """C_v + C_w [W]: blood volume and pumping power, the cost a tree's geometry alone sets
+    (the polish report's ``vascular_*``; :func:`vasc_pipeline.model.geometry.vascular_cost`
+    is the same sum from positions)."""
+    return terms["volume"] + terms["power"]
+
+
 def vascular_exclusion_cost(terms: dict[str, float], w_exclusion: float) -> float:
     """C_v + C_w + (A_o / A_wv) C_o [W], with ``w_exclusion`` = A_o / A_wv: the annealed cost
-    without the supply and pressure terms, the "vascular part" the benchmarks report."""
-    return terms["volume"] + terms["power"] + w_exclusion * terms["exclusion"]
+    without the supply and pressure terms, the "vascular part" the benchmarks report
+    (``cost_vascular`` in their rows)."""
+    return vascular_cost(terms) + w_exclusion * terms["exclusion"]
 
 
 def total_cost(terms: dict[str, float], physics: Physics) -> float:
     """The annealed cost C = (C_w + C_v) + (A_o C_o + A_p C_p + A_s C_s) / A_wv."""
     w_o, w_p, w_s = physics.weights
-    return (
-        (terms["volume"] + terms["power"]) + w_o * terms["exclusion"] + w_p * terms["pressure"] + w_s * terms["supply"]
-    )
+    return vascular_cost(terms) + w_o * terms["exclusion"] + w_p * terms["pressure"] + w_s * terms["supply"]

@@ -1,6 +1,6 @@
 """Physical parameters of the tree model and the per-segment cost tables.
 
-Radii and flows follow from topology alone (SPEC section 2): with ``n`` the number of
+Radii and flows follow from topology alone (Murray's law at fixed gamma): with ``n`` the number of
 terminals downstream of a segment, ``Q = n Q0 / N`` and ``r = r_t n^(1/gamma)`` with
 ``r_t = r_in N^(-1/gamma)``. Every per-segment cost is therefore a function of ``n``
 times a geometric quantity (length, or the exclusion traversal sum), so the kernel looks

@@ -1,7 +1,7 @@
 """Checkpointable random numbers: xoshiro256** with its state in a uint64[4] array.
 
 The state is an ordinary array, so it is saved with every checkpoint and a resumed run
-draws exactly the numbers an uninterrupted run would (SPEC section 2, "Randomness").
+draws exactly the numbers an uninterrupted run would.
 ``seed_state`` expands a 64-bit seed with splitmix64, as the generator's authors advise.
 The ``*_reference`` functions are plain-Python twins that tests compare against.
 """

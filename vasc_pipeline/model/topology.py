@@ -1,7 +1,7 @@
 """Parent-array topology of a tree or forest: checks, depth, order, children, lengths.
 
-The home of the tree helpers every stage shares (NumPy only, no numba). Tree arrays as in
-SPEC section 7:
+The home of the tree helpers every stage shares (NumPy only, no numba). Tree arrays as a run
+store holds them:
 
 - ``parent``   int64 (node,)     parent node, -1 at inlets
 - ``position`` float64 (node, 3) metres

@@ -119,7 +119,7 @@ def random_tree(
     inlet_share: list[float] | None = None,
     inlet_assignment: str = "random",
 ) -> Tree:
-    """Random initial tree (SPEC section 2).
+    """Random initial tree (the paper's starting point).
 
     Terminals uniformly at random in the tissue (or at ``sites``), each assigned to a
     uniformly random inlet (every inlet gets at least one), a random topology per inlet

@@ -10,7 +10,7 @@ The anneal loop is the engine's (blocks of ``anneal.trace_every`` proposals, one
 record per block); blocks start at multiples of ``trace_every`` from step 0 whether or not
 the run was resumed, so a resumed run ends with exactly the tree and trace of an
 uninterrupted one. The job writes everything it produces to the store and returns a small
-summary: results held in a dead worker's memory would be recomputed (SPEC section 8).
+summary: results held in a dead worker's memory would be recomputed when the worker dies.
 """
 
 from __future__ import annotations

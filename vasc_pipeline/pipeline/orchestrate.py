@@ -11,7 +11,7 @@ and, optionally, a Dask client of their own). The path of a sweep:
    against the requested config (a changed config is refused, never mixed); stores of new
    runs are created here, before any job is dispatched (:mod:`vasc_pipeline.pipeline.planning`).
 3. The numba kernels are compiled (or loaded from the on-disk cache) once in this process,
-   so that workers load them instead of racing to compile (SPEC section 8).
+   so that workers load them instead of racing to compile (and each compiling the same code).
 4. :func:`vasc_pipeline.pipeline.cluster.open_client`: a LocalCluster (process workers, one thread
    each, everything on 127.0.0.1), an existing scheduler (``cluster.address``), or SLURM via
    dask-jobqueue.
@@ -33,7 +33,8 @@ from typing import Any, TextIO
 
 from .. import config as _config
 from ..config.schema import ConfigError, RunConfig
-from ..store.run_store import RUNS_DIR, StoreError
+from ..store.layout import RUNS_DIR
+from ..store.run_store import StoreError
 from .cluster import (
     SweepStartError,
     check_cluster,
@@ -303,7 +304,7 @@ def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
 
 def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | None]:
     """Reduce a finished sweep; a failure is reported, never raised: the runs are already stored."""
-    from ..reduce.stage import reduce
+    from ..reduce import reduce
 
     try:
         return reduce(output_dir, stream=stream), None
@@ -319,7 +320,7 @@ def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | No
 
 def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
     """``+stage=reduce``: reduce the complete runs already in ``cfg.output_dir``; returns the exit status."""
-    from ..reduce.stage import ReductionError, reduce
+    from ..reduce import ReductionError, reduce  # the package attribute: what callers (and tests) replace
 
     stream = stream or sys.stderr
     try:  # the same checks as a run: a typo'd value is reported, not silently ignored

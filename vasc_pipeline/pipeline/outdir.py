@@ -18,11 +18,10 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
-from ..store.run_store import RUNS_DIR, file_lock
+from ..store.layout import LOCK_NAME, RUNS_DIR
+from ..store.run_store import file_lock
 
 __all__ = ["LOCK_NAME", "OutputDirLocked", "output_dir_lock", "check_output_dir", "OutputDirCallback"]
-
-LOCK_NAME = ".vasc_pipeline.lock"
 
 
 class OutputDirLocked(OSError):

@@ -14,18 +14,18 @@ from pathlib import Path
 from typing import Any
 
 from .. import config as _config
+from ..config.identity import mixed_configuration
 from ..config.schema import ConfigError, RunConfig
+from ..store.layout import coords_cell_id, run_store_paths
 from ..store.run_store import (
-    RUNS_DIR,
     STATUS_COMPLETE,
     SWEEP_AXES,
     RunStore,
     StoreError,
-    identity_differences,
     is_empty_leftover,
     verify_store,
 )
-from .sweep import Job, cell_id, expand
+from .sweep import Job, expand
 
 __all__ = ["Plan", "plan", "inspect_stores", "check_one_configuration", "create_stores"]
 
@@ -96,46 +96,35 @@ def inspect_stores(p: Plan) -> None:
 def check_one_configuration(p: Plan) -> None:
     """Refuse a sweep whose runs would share an output_dir with runs of another configuration.
 
-    Every store of an output_dir shares the configuration except the sweep axes
-    (``store.SWEEP_AXES``; runs of another method share what both methods use), and the runs
-    of one cell (grid point without the seed) share their number of proposed moves: otherwise
-    the reduction's best seed of a cell would be picked across different physics or
-    schedules. Unreadable stores are skipped here (see
-    :func:`inspect_stores` and the reduction, which name them).
+    The rule is :func:`vasc_pipeline.config.identity.mixed_configuration`'s (the reduction
+    applies it too): the stored runs against the requested config and step counts. Unreadable
+    stores are skipped here (see :func:`inspect_stores` and the reduction, which name them).
     """
-    first = p.jobs[0]
-    cell_steps = {j.cell: p.total_steps[j.run_id] for j in p.jobs}
-    root = p.output_dir / RUNS_DIR
-    for path in sorted(root.glob("*.zarr")) if root.is_dir() else []:
+    stored = []
+    for path in run_store_paths(p.output_dir):
         try:
             attrs = RunStore.open(path, mode="r").attrs
         except StoreError:
             continue
-        diff = identity_differences(attrs.get("config") or {}, first.config)
-        coords = attrs.get("coords") or {}
         try:
-            cell = cell_id(
-                coords["tissue"],
-                coords["n_terminals"],
-                coords["m_b"],
-                coords.get("steps"),
-                coords.get("method") or "anneal",
-            )
+            cell = coords_cell_id(attrs.get("coords") or {})
         except (KeyError, TypeError, ValueError):
             cell = None
-        if cell in cell_steps and int(attrs.get("total_steps", -1)) != cell_steps[cell]:
+        stored.append((path.name, attrs.get("config") or {}, cell, int(attrs.get("total_steps", -1))))
+    requested = {j.cell: p.total_steps[j.run_id] for j in p.jobs}
+    for name, diff, clash in mixed_configuration(stored, p.jobs[0].config, requested)[:1]:
+        if clash:
+            cell, steps, requested_steps, _ = clash
             diff.append(
-                f"proposed moves of cell {cell}: {attrs.get('total_steps')} (stored) vs "
-                f"{cell_steps[cell]} (requested; anneal.steps)"
+                f"proposed moves of cell {cell}: {steps} (stored) vs {requested_steps} (requested; anneal.steps)"
             )
-        if diff:
-            raise ConfigError(
-                f"output_dir {str(p.output_dir)!r} holds runs of another configuration, and runs are never mixed: "
-                f"{path.name} differs in {'; '.join(diff)}. Every run in one output_dir shares its configuration "
-                f"except the sweep axes ({', '.join(SWEEP_AXES)}), and the runs of one cell share their "
-                "anneal.steps. Restore those settings, or choose a new output_dir (output_dir=...) for the "
-                "changed configuration."
-            )
+        raise ConfigError(
+            f"output_dir {str(p.output_dir)!r} holds runs of another configuration, and runs are never mixed: "
+            f"{name} differs in {'; '.join(diff)}. Every run in one output_dir shares its configuration "
+            f"except the sweep axes ({', '.join(SWEEP_AXES)}), and the runs of one cell share their "
+            "anneal.steps. Restore those settings, or choose a new output_dir (output_dir=...) for the "
+            "changed configuration."
+        )
 
 
 def create_stores(p: Plan) -> None:

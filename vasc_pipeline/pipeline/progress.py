@@ -14,7 +14,8 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any, TextIO
 
-from ..store.run_store import RUNS_DIR, RunStore
+from ..store.layout import RUNS_DIR
+from ..store.run_store import RunStore
 
 if TYPE_CHECKING:
     from .planning import Plan

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config.schema import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
-from ..store.run_store import run_path
+from ..store.layout import cell_id, run_id, run_path
 
 __all__ = ["Job", "expand", "run_id", "cell_id", "job_config", "stored_config"]
 
@@ -53,28 +53,6 @@ class Job:
 
     def run_config(self) -> RunConfig:
         return to_run_config(self.config)
-
-
-def _number(value: float) -> str:
-    """Compact, stable text of a grid value: 641.3 -> '641.3', 6413.0 -> '6413', 1e12 -> '1e12'."""
-    return f"{value:.10g}".replace("e+", "e")
-
-
-def cell_id(tissue: str, n_terminals: int, m_b: float, steps: int | None = None, method: str = "anneal") -> str:
-    text = f"{tissue}-N{int(n_terminals)}-mb{_number(m_b)}"
-    text = text if steps is None else f"{text}-S{int(steps)}"
-    return text if method == "anneal" else f"{text}-{method}"  # anneal ids stay as they always were
-
-
-def run_id(
-    tissue: str, n_terminals: int, m_b: float, seed: int, steps: int | None = None, method: str = "anneal"
-) -> str:
-    """``<tissue>-N<N>-mb<m_b>[-S<steps>][-<method>]-s<seed>``: the grid coordinates (cell id + seed).
-
-    The method appears only when it is not the anneal (``heart-N200-mb641.3-cco-s0``), so
-    the ids of anneal runs are those of stores written before CCO existed.
-    """
-    return f"{cell_id(tissue, n_terminals, m_b, steps, method)}-s{int(seed)}"
 
 
 def stored_config(run_cfg: RunConfig) -> dict:

@@ -9,5 +9,6 @@ orders, elements, statistics), :mod:`~vasc_pipeline.reduce.reference` (Kassab 19
 
 from . import stage as _stage
 from .stage import *  # noqa: F403
+from .stage import remove_superseded_outputs
 
-__all__ = list(_stage.__all__)
+__all__ = [*_stage.__all__, "remove_superseded_outputs"]

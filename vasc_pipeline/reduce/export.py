@@ -1,6 +1,6 @@
 """Export trees to VTK PolyData (``.vtp``, opens in ParaView) and CSV.
 
-Pure functions on the tree arrays of SPEC section 7 (``parent``, ``position`` [m],
+Pure functions on a run store's tree arrays (``parent``, ``position`` [m],
 ``radius`` [m], ``kind``), plus :func:`export_run` for a finished run store::
 
     from vasc_pipeline.reduce.export import export_run
@@ -52,7 +52,7 @@ def tree_table(
     radius : float64 (node,), metres (0 at inlets)
     kind : int8 (node,)
     total_flow : float, optional
-        Q0 [m^3 s^-1]; gives ``flow_m3_s = n_i Q0 / N`` (SPEC section 2). None: no flow column.
+        Q0 [m^3 s^-1]; gives ``flow_m3_s = n_i Q0 / N`` (flow splits with the terminals). None: no flow column.
     orders, strahler : int (node,), optional
         Segment orders (0 at inlets); default: diameter-defined and conventional Strahler
         orders shifted so the highest is 11 (from :func:`vasc_pipeline.reduce.morphometry.morphometry`).

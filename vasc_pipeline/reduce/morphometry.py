@@ -1,6 +1,6 @@
 """Order-wise morphometry of a tree: diameter-defined Strahler orders, elements, statistics.
 
-Pure functions on the tree arrays of SPEC section 7 (NumPy only, no numba); the
+Pure functions on a run store's tree arrays (NumPy only, no numba); the
 topology helpers live in :mod:`vasc_pipeline.model.topology`, the orders in
 :mod:`vasc_pipeline.reduce.ordering` and the comparison with Kassab 1993 in
 :mod:`vasc_pipeline.reduce.reference` (all re-exported here):
@@ -345,7 +345,7 @@ def morphometry(
         Both order schemes are shifted so that their highest order equals ``top``
         (Kassab's trunk order 11); None keeps raw orders (1 = terminal).
     max_iter, tol, reading
-        Passed to :func:`diameter_defined_strahler` (``reading``: "range", SPEC's, or
+        Passed to :func:`diameter_defined_strahler` (``reading``: "range", the default, or
         "confluence").
     min_segment_length : float
         Segments between branch points shorter than this (metres) are contracted before

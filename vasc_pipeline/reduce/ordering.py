@@ -11,7 +11,7 @@ secondary sources give two readings of the reassignment step
 orders, use the bounds ``B(n,n+1) = [(D_n + SD_n) + (D_{n+1} - SD_{n+1})] / 2`` between
 consecutive orders and repeat until fewer than ``tol`` of the segments change order:
 
-- ``"range"`` (the default, SPEC section 4): every segment gets the order whose diameter
+- ``"range"`` (the default): every segment gets the order whose diameter
   interval ``(B(n-1,n), B(n,n+1)]`` contains its diameter;
 - ``"confluence"``: from the periphery to the root, a terminal segment gets the order
   whose interval contains its diameter; where the two highest daughter orders are both n,
@@ -213,11 +213,11 @@ def diameter_defined_strahler(
         Maximum number of reassignment passes (>= 1).
     tol : float
         Stop when the fraction of segments changing order in a pass is below this
-        (SPEC: 1 %).
+        (1 % by default).
     initial : int (node,), optional
         Starting orders; default the conventional Strahler orders.
     reading : {"range", "confluence"}
-        How a pass reassigns orders (module docstring); "range" is SPEC's.
+        How a pass reassigns orders (module docstring); "range" is the default.
 
     Returns
     -------

@@ -14,11 +14,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
-from ..store.run_store import RUNS_DIR, STATUS_COMPLETE, SWEEP_AXES, StoreError, identity_differences, verify_store
+from ..config.identity import mixed_configuration
+from ..model.costs import COST_TERMS
+from ..store.layout import cell_id, run_store_paths
+from ..store.run_store import STATUS_COMPLETE, SWEEP_AXES, StoreError, verify_store
 
 __all__ = ["RunInfo", "ReductionError", "find_runs", "check_one_configuration", "best_runs", "as_float", "COST_KEYS"]
 
-COST_KEYS = ("total", "volume", "power", "supply", "exclusion", "pressure")
+COST_KEYS = ("total", *COST_TERMS)  # a run's attrs["cost"]
 
 
 class ReductionError(RuntimeError):
@@ -43,6 +46,11 @@ class RunInfo:
     statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
     config: dict[str, Any] = field(default_factory=dict, repr=False)  # the run's stored config
     method: str = "anneal"  # "anneal" or "cco" (stores written before CCO existed are anneal runs)
+
+    @property
+    def cell_id(self) -> str:
+        """The run's cell key (:func:`vasc_pipeline.store.layout.cell_id`)."""
+        return cell_id(self.tissue, self.n_terminals, self.m_b, self.steps, self.method)
 
     def cell(self, dims: Iterable[str]) -> tuple:
         return tuple(getattr(self, d) for d in dims)
@@ -73,8 +81,7 @@ def find_runs(
         also put in ``damaged`` when given.
     """
     runs, skipped = [], {}
-    root = Path(output_dir) / RUNS_DIR
-    for path in sorted(root.glob("*.zarr")) if root.is_dir() else []:
+    for path in run_store_paths(output_dir):
         try:
             attrs = verify_store(path).attrs
         except StoreError as exc:
@@ -115,22 +122,18 @@ def find_runs(
 def check_one_configuration(output_dir: str | os.PathLike, runs: list[RunInfo]) -> None:
     """Refuse (ReductionError) runs of different configurations in one output_dir.
 
-    The sweep refuses to write them (``planning.check_one_configuration``); this catches
+    The sweep refuses to write them (:func:`vasc_pipeline.pipeline.planning.check_one_configuration`;
+    the rule is :func:`vasc_pipeline.config.identity.mixed_configuration`); this catches
     directories mixed by hand or by an older version, whose best seed per cell would otherwise
     be picked across different physics or schedules.
     """
-    first, problems = runs[0], []
-    for r in runs[1:]:
-        diff = identity_differences(r.config, first.config)
+    problems = []
+    for name, diff, clash in mixed_configuration((r.run_id, r.config, r.cell_id, r.steps_done) for r in runs):
         if diff:
-            problems.append(f"{r.run_id} differs from {first.run_id} in {'; '.join(diff)}")
-    cells: dict[tuple, RunInfo] = {}
-    for r in runs:
-        other = cells.setdefault((r.tissue, r.n_terminals, r.m_b, r.steps, r.method), r)
-        if other.steps_done != r.steps_done:
-            problems.append(
-                f"{r.run_id} ran {r.steps_done} proposed moves, {other.run_id} of the same cell {other.steps_done}"
-            )
+            problems.append(f"{name} differs from {runs[0].run_id} in {'; '.join(diff)}")
+        if clash:
+            _, steps, other_steps, other = clash
+            problems.append(f"{name} ran {steps} proposed moves, {other} of the same cell {other_steps}")
     if problems:
         raise ReductionError(
             f"output_dir {str(output_dir)!r} holds runs of different configurations, which are never reduced together "

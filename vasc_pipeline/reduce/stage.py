@@ -27,7 +27,15 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from ..store.run_store import RUNS_DIR
+from ..store.layout import (
+    COMPARISON_CSV,
+    COMPARISON_SUMMARY_CSV,
+    FIGURES_DIR,
+    RUNS_DIR,
+    SUMMARY_NAME,
+    TREES_DIR,
+    run_store_paths,
+)
 from . import morphometry as _m
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
@@ -51,10 +59,6 @@ __all__ = [
     "COMPARISON_SCHEME",
     "COMPARISON_LEVEL",
 ]
-
-SUMMARY_NAME = "summary.zarr"
-COMPARISON_CSV = "comparison.csv"
-COMPARISON_SUMMARY_CSV = "comparison_summary.csv"
 
 
 @dataclass
@@ -197,12 +201,12 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
     out = Path(output_dir)
     current = {r.run_id for r in best.values()}
     removed = []
-    for store_path in sorted((out / RUNS_DIR).glob("*.zarr")):
+    for store_path in run_store_paths(out):
         run_id = store_path.name.removesuffix(".zarr")
         if run_id in current:
             continue
         # the tree figure's name is make_figures' (vasc_pipeline.figures, not imported here: matplotlib)
-        for path in (*export_paths(out / "trees", run_id), out / "figures" / f"tree_{run_id}.png"):
+        for path in (*export_paths(out / TREES_DIR, run_id), out / FIGURES_DIR / f"tree_{run_id}.png"):
             if path.is_file():
                 path.unlink()
                 removed.append(path)
@@ -262,7 +266,7 @@ def reduce(
 
         try:
             for r in best.values():
-                result.trees.extend(export_run(r.path, out / "trees"))
+                result.trees.extend(export_run(r.path, out / TREES_DIR))
         except Exception as exc:  # an export problem must not hide the summary already written
             result.errors["exports"] = f"{type(exc).__name__}: {exc}"
     if figures:

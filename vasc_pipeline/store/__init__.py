@@ -6,5 +6,6 @@
 
 from . import run_store as _run_store
 from .run_store import *  # noqa: F403
+from .run_store import FORMAT, TRACE_CHUNK
 
-__all__ = list(_run_store.__all__)
+__all__ = [*_run_store.__all__, "FORMAT", "TRACE_CHUNK"]

@@ -1,6 +1,6 @@
 """The run store: one Zarr (v3) directory store per run, with atomic checkpoints.
 
-Layout (SPEC section 7)::
+Layout::
 
     runs/<run_id>.zarr
         attrs: run_id, seed, status ("running" | "complete"), steps_done, wall_seconds,
@@ -13,9 +13,10 @@ Layout (SPEC section 7)::
         trace/{step, temperature, volume, ..., total, acceptance}   dim "step"
         checkpoints/c<seq>/<state field>            kernel state (engine.state_arrays)
 
-Atomicity (SPEC section 8). ``LocalStore`` writes one key atomically (temp file + rename)
-but nothing more, so every multi-key update follows one rule: write new keys first, then
-flip one key (the root ``zarr.json``, i.e. the root attributes) that makes them valid.
+Atomicity (a crash mid-write never leaves a store that reads as valid). ``LocalStore``
+writes one key atomically (temp file + rename) but nothing more, so every multi-key update
+follows one rule: write new keys first, then flip one key (the root ``zarr.json``, i.e. the
+root attributes) that makes them valid.
 
 - A checkpoint is a new group ``checkpoints/c<seq>``: arrays first, then a manifest in the
   group's attributes (shape, dtype and CRC-32 of every array), then the root attributes
@@ -50,7 +51,9 @@ import zarr
 
 from ..config.identity import SWEEP_AXES, config_differences, config_hash, hashed_config, identity_differences
 from ..config.schema import ConfigError
+from ..model.costs import COST_TERM_LABELS, COST_TERMS
 from .checkpoints import CHECKPOINTS, Checkpoint, CheckpointsMixin, CheckpointWarning, crc32
+from .layout import RUNS_DIR, run_path
 
 __all__ = [
     "RunStore",
@@ -74,7 +77,6 @@ __all__ = [
     "RUNS_DIR",
 ]
 
-RUNS_DIR = "runs"
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
 FORMAT = "vasc_pipeline.run/1"
 TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small files
@@ -83,11 +85,7 @@ TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small fi
 TRACE_FIELDS = (
     ("step", "int64", "1", "proposed moves so far"),
     ("temperature", "float64", "W", "annealing temperature (cost units)"),
-    ("volume", "float64", "W", "C_v, metabolic cost of blood volume"),
-    ("power", "float64", "W", "C_w, pumping power"),
-    ("supply", "float64", "1", "C_s, supply cost (voxel count score)"),
-    ("exclusion", "float64", "m2", "C_o, large-vessel exclusion cost"),
-    ("pressure", "float64", "Pa2", "C_p, terminal pressure cost"),
+    *((term, "float64", *COST_TERM_LABELS[term]) for term in COST_TERMS),  # in the engine's Trace order
     ("total", "float64", "W", "annealed total cost C"),
     ("acceptance", "float64", "1", "accepted fraction of the block's proposals"),
 )
@@ -129,11 +127,6 @@ def verify_store(path: str | os.PathLike) -> "RunStore":
             "other runs are not affected"
         ) from exc
     return store
-
-
-def run_path(output_dir: str | os.PathLike, run_id: str) -> Path:
-    """``<output_dir>/runs/<run_id>.zarr``."""
-    return Path(output_dir) / RUNS_DIR / f"{run_id}.zarr"
 
 
 @contextlib.contextmanager
@@ -182,6 +175,20 @@ def _jsonable(value: Any) -> Any:
         value = float(value)
         return value if math.isfinite(value) else str(value)
     return value
+
+
+def _write_whole_array(group: zarr.Group, name: str, data: np.ndarray, dtype, dims, attributes: dict) -> None:
+    """``group[name]`` = ``data`` in one chunk, with its dimension names and attributes (replacing any)."""
+    arr = group.create_array(
+        name,
+        shape=data.shape,
+        dtype=dtype,
+        chunks=data.shape,
+        dimension_names=dims,
+        overwrite=True,
+        attributes=attributes,
+    )
+    arr[...] = data
 
 
 class RunStore(CheckpointsMixin):
@@ -342,16 +349,7 @@ class RunStore(CheckpointsMixin):
             ),
         )
         for name, data, dtype, dims, attributes in specs:
-            arr = group.create_array(
-                name,
-                shape=data.shape,
-                dtype=dtype,
-                chunks=data.shape,
-                dimension_names=dims,
-                overwrite=True,
-                attributes=attributes,
-            )
-            arr[...] = data
+            _write_whole_array(group, name, data, dtype, dims, attributes)
 
     def has_tissue(self) -> bool:
         try:
@@ -462,16 +460,7 @@ class RunStore(CheckpointsMixin):
         )
         for name, data, dtype, dims, long_name, units in specs:
             data = np.ascontiguousarray(data, dtype=dtype)
-            arr = group.create_array(
-                name,
-                shape=data.shape,
-                dtype=dtype,
-                chunks=data.shape,
-                dimension_names=dims,
-                overwrite=True,
-                attributes={"long_name": long_name, "units": units},
-            )
-            arr[...] = data
+            _write_whole_array(group, name, data, dtype, dims, {"long_name": long_name, "units": units})
         # CRC-32 of what the run produced (tree and committed trace), read back as stored, in the
         # same attribute write that makes the run complete: verify() checks them.
         checksums = {key: crc32(data) for key, data in self._final_arrays(int(trace_length)).items()}

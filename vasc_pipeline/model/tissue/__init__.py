@@ -1,4 +1,4 @@
-"""Tissue domains as voxel grids (SPEC section 3): the registry of named tissues and its builder.
+"""Tissue domains as voxel grids (isotropic voxels): the registry of named tissues and its builder.
 
 :func:`build_tissue` returns a :class:`Tissue` for each named domain of :data:`TISSUES`:
 ``sphere``, ``box``, ``plane2d`` and ``mask`` (a user's array) from

@@ -6,9 +6,9 @@ large vessels must not penetrate (the tissue itself plus, for the heart, the ven
 cavities), with that domain's Euclidean distance transform (scipy), the map the
 exclusion term uses. :func:`voxelize` turns an ``inside(x, y, z)`` predicate into a mask
 on a padded grid, :func:`default_voxel_size` is the voxel edge a tissue gets when its config
-does not fix one (R_supply / 4, SPEC section 3), and :func:`check_grid_memory` refuses a grid
-that would not fit in memory. The builders are in :mod:`vasc_pipeline.model.tissue.shapes` and
-:mod:`vasc_pipeline.model.tissue.heart`.
+does not fix one (R_supply / 4, so a supply sphere spans ~270 voxels at every N), and
+:func:`check_grid_memory` refuses a grid that would not fit in memory. The builders are in
+:mod:`vasc_pipeline.model.tissue.shapes` and :mod:`vasc_pipeline.model.tissue.heart`.
 
 The grid always extends beyond the tissue (at least one voxel, and a margin where large
 vessels are expected to run outside the tissue) so that the distance transform sees a
@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 # Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
-# ~270 voxels per supply sphere at every N (SPEC section 3).
+# ~270 voxels per supply sphere at every N.
 VOXELS_PER_SUPPLY_RADIUS = 4.0
 # Peak bytes per voxel while a grid is built: three float64 coordinate grids, the boolean and
 # uint8 masks, the distance transform (float64 distances and int32 feature indices per axis)
@@ -156,7 +156,7 @@ class Tissue:
         3, or 2 for a single voxel layer at z = origin[2] (all nodes stay in that plane).
     inlet_names : tuple of str
     exclusion : uint8 ndarray (nz, ny, nx), optional
-        1 = large vessels excluded (SPEC section 2, C_o). Given: the tissue plus these
+        1 = large vessels excluded (the domain of C_o). Given: the tissue plus these
         voxels (e.g. cavities, which supply nothing but must not be crossed); default: the
         tissue only.
     open_boundary : bool ndarray (nz, ny, nx), optional
@@ -334,7 +334,7 @@ def voxelize(
 def default_voxel_size(
     n_terminals: int, measure: float, ndim: int, q_required: float | None = None, total_flow: float | None = None
 ) -> float:
-    """R_supply / 4 (SPEC section 3) for the given tissue measure (volume, or area in 2-D).
+    """R_supply / 4 (~270 voxels per supply sphere) for the given tissue measure (volume, or area in 2-D).
 
     R_supply is :func:`vasc_pipeline.model.physics.supply_radius`, the one formula the cost uses,
     so a given ``tissue.q_required`` sizes the voxels too.

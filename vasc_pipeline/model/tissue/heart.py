@@ -1,4 +1,4 @@
-"""The paper's coronary substrate: a two-ventricle heart of 218 g, tissue ``heart`` (SPEC sections 2, 3).
+"""The paper's coronary substrate: a two-ventricle heart of 218 g, tissue ``heart``.
 
 Keelan, Chung & Hague model the myocardium as "an ellipsoidal human heart muscle of mass
 218 g": the left ventricle (LV) a thick-walled ellipsoid, the right ventricle (RV) a

@@ -1,4 +1,4 @@
-"""The simple tissue domains: ``sphere``, ``box``, ``plane2d`` and a user's voxel ``mask`` (SPEC section 3).
+"""The simple tissue domains: ``sphere``, ``box``, ``plane2d`` and a user's voxel ``mask``.
 
 Each builder takes ``n_terminals`` and its ``tissue.*`` config keys (keys meant for other
 tissues are ignored) and returns a :class:`~vasc_pipeline.model.tissue.grid.Tissue`; when the

@@ -4,7 +4,7 @@
 # a checkpointed pipeline job, so rerunning this script after an interruption continues where
 # it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
 #
-#     bash benchmarks/coarse_exclusion_study.sh [OUT [PART ...]]   # default OUT: results/coarse_exclusion
+#     bash benchmarks/studies/2026-11-27_coarse_exclusion/run.sh [OUT [PART ...]]   # default OUT: results/coarse_exclusion
 #
 # PART is 1, 2 or 3 below (default: all three, in order); e.g. `... results/coarse_exclusion 3`
 # continues only the full-budget N = 6000 runs.
@@ -23,7 +23,7 @@
 # one after the other on a shared machine are no paired comparison (the coarse part's speed is
 # measured in benchmarks/README.md). Runs one job at a time (--workers 1).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../../.."
 OUT=${1:-results/coarse_exclusion}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2 3)

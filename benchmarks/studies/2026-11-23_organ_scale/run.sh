@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# The organ-scale and fidelity measurements (issues 12 and 13), resumable: every run is a
+# The organ-scale and fidelity measurements (N up to 6000, morphometry against Kassab), resumable: every run is a
 # checkpointed pipeline job, so rerunning this script after an interruption continues where
 # it stopped (even inside a 5-hour N = 6000 run). Rows go to OUT/rows.jsonl.
 #
-#     bash benchmarks/organ_scale_campaign.sh [OUT]        # default OUT: results/organ_scale
+#     bash benchmarks/studies/2026-11-23_organ_scale/run.sh [OUT]        # default OUT: results/organ_scale
 #
 # 1. anneal=fast_v1 (the baseline) against the packing candidate at the same budget (x1) and
 #    half of it (x0.5), N = 500, 1000, 2000, seeds 0-3 (seeds 0-1 first);
@@ -11,7 +11,7 @@
 # Runs one job at a time (--workers 1); start a second copy with the N = 6000 part to use
 # both cores.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../../.."
 OUT=${1:-results/organ_scale}
 T=(python benchmarks/time_to_quality.py --out "$OUT" --workers 1)
 # The packing candidate on fast_v1's schedule and budget, as measured (fast has changed since).

@@ -4,7 +4,7 @@
 # every run is a checkpointed pipeline job, so rerunning this script after an interruption
 # continues where it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
 #
-#     bash benchmarks/budget_law_study.sh [OUT [PART ...]]   # default OUT: results/budget_law_study
+#     bash benchmarks/studies/2026-12-01_budget_law/run.sh [OUT [PART ...]]   # default OUT: results/budget_law_study
 #
 # PART is 1 or 2 below (default: both, in order), with the environment that has vasc_pipeline
 # installed active (the script calls `python`):
@@ -15,7 +15,7 @@
 # 2 over 0.3`, the default before) are in benchmarks/results/time_to_quality_rows.jsonl. Runs one
 # job at a time (--workers 1); start a second copy with the other part to use both cores.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../../.."
 OUT=${1:-results/budget_law_study}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2)
