@@ -1,7 +1,7 @@
 """How many moves a schedule needs as N grows: the exponent of the budget law, fitted.
 
 Reads rows of ``benchmarks/time_to_quality.py`` (one schedule, several N and budgets,
-seeds) and answers the organ-scale issue's question "how many moves does today's schedule
+seeds) and answers the organ-scale question "how many moves does today's schedule
 need to reach a given quality as N grows?" in two ways, fitting moves ∝ N^alpha by least
 squares in log-log over the N that reach each level:
 

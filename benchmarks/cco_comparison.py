@@ -1,4 +1,4 @@
-"""CCO against the anneal on the same terminal sites, tissue and cost (issue 15).
+"""CCO against the anneal on the same terminal sites, tissue and cost.
 
 For every N: CCO grows a tree on the heart from random sites (seed 0, Schreiner's distance
 criterion); its N sites are written to ``sites_N<N>.csv``. On that one site set:
@@ -37,11 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
+from vasc_pipeline.reduce.reference import ARTERIES
+
 TISSUE = ["tissue=heart"]
 # heart: the paper's cost, so the anneal also weighs exclusion (A_o = 100), which CCO's
 # growth does not see; heart_no_exclusion: A_o = 0, so both minimise the same C_v + C_w.
 CASES = {"heart": [], "heart_no_exclusion": ["physics.A_o=0"]}
-ARTERIES = ("RCA", "LAD", "LCX")
 
 
 # --------------------------------------------------------------------------------------------
@@ -49,8 +50,8 @@ ARTERIES = ("RCA", "LAD", "LCX")
 
 
 def tree_measures(parent, position, radius, kind, gamma) -> dict:
-    from vasc_pipeline.morphometry import compare_with_kassab, morphometry
-    from vasc_pipeline.similarity import main_trunks, resample_polyline
+    from vasc_pipeline.reduce.morphometry import compare_with_kassab, morphometry
+    from vasc_pipeline.reduce.similarity import main_trunks, resample_polyline
 
     ds = morphometry(parent, position, radius, kind).sel(scheme="diameter_defined")
     orders = [int(o) for o in ds.order.values]
@@ -71,8 +72,8 @@ def tree_measures(parent, position, radius, kind, gamma) -> dict:
 
 
 def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, wall: float, **extra) -> dict:
-    from vasc_pipeline.costs import vascular_exclusion_cost
     from vasc_pipeline.engine import node_radii
+    from vasc_pipeline.model.costs import vascular_cost, vascular_exclusion_cost
 
     m = tree_measures(
         tree.parent,
@@ -85,7 +86,7 @@ def _row(kind: str, n: int, seed: int, costs: dict, w_o: float, tree, physics, w
         "method": kind,
         "n": n,
         "seed": seed,
-        "vascular": costs["volume"] + costs["power"],
+        "vascular": vascular_cost(costs),
         "exclusion_scaled": w_o * costs["exclusion"],
         "vascular_exclusion": vascular_exclusion_cost(costs, w_o),
         "wall_seconds": wall,
@@ -170,7 +171,7 @@ def _fmt(mean: float, se: float, scale: float = 1.0, digits: int = 4) -> str:
 
 
 def summarise(rows: list[dict]) -> dict:
-    from vasc_pipeline.similarity import trunk_spread
+    from vasc_pipeline.reduce.similarity import trunk_spread
 
     tables = {"energy": [], "asymmetry": [], "order": [], "kassab": []}
     for n in sorted({r["n"] for r in rows}):
@@ -262,7 +263,7 @@ def speed(ns: list[int], repeats: int, extra: list[str]) -> list[dict]:
         problem = engine.build_problem(config.compose([*TISSUE, f"n_terminals={n}", "method=cco", *extra]))
         cco.grow_tree(problem, np.array([1, 2, 3, 4], dtype=np.uint64))  # compile (cached) outside the timing
         for seed in range(repeats):
-            from vasc_pipeline.rng import seed_state
+            from vasc_pipeline.model.rng import seed_state
 
             t0, c0 = time.perf_counter(), time.process_time()
             tree, _, drawn, _ = cco.grow_tree(problem, seed_state(seed))

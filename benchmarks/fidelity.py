@@ -9,9 +9,9 @@ level):
   orders present in both, trunk = 11 (the reduction's alignment), and the same with the
   terminal order placed on Kassab's order of nearest diameter (``..._terminal_aligned_...``);
 - the same errors and ``n_orders`` under the confluence reading of the ordering
-  (``..._confluence_...``; :mod:`vasc_pipeline.ordering`: orders never decrease toward the root);
+  (``..._confluence_...``; :mod:`vasc_pipeline.reduce.ordering`: orders never decrease toward the root);
 - ``n_orders``, ``diameter_ratio_per_order`` (10^slope of log10 element diameter against
-  order; Kassab's LAD, orders 5-11: 1.91) and per order the element count, segments per
+  order; Kassab's LAD, orders 5-11: 1.86) and per order the element count, segments per
   element, mean diameter and length (``orders``);
 - the cost balance: C_v, C_w, the weighted exclusion (A_o/A_wv) C_o and the share of C_o
   carried by terminal segments, the mean pressure drop C_w / Q0 [Pa];
@@ -39,23 +39,13 @@ from pathlib import Path
 import numpy as np
 from time_to_quality import ARTERIES, jobs_for, morphometry_row, run_one, seed_groups, seed_stats
 
-KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
-KASSAB_TOP_ORDER = {"RCA": 11, "LAD": 11, "LCX": 10}  # each artery's trunk order in Tables 1-3
-
-
-def diameter_ratio_per_order(orders, diameters) -> float:
-    """10 ** slope of log10(diameter) against order (least squares)."""
-    orders, diameters = np.asarray(orders, dtype=float), np.asarray(diameters, dtype=float)
-    if orders.size < 2:
-        return float("nan")
-    return float(10 ** np.polyfit(orders, np.log10(diameters), 1)[0])
-
-
-def kassab_ratio() -> float:
-    from vasc_pipeline.reference import kassab_dataset
-
-    lad = kassab_dataset().sel(artery="LAD", level="element")
-    return diameter_ratio_per_order(lad.order.values[KASSAB_FIT_ORDERS], lad.D_mean.values[KASSAB_FIT_ORDERS])
+from vasc_pipeline.reduce.fidelity import (
+    KASSAB_TOP_ORDER,
+    diameter_ratio_per_order,
+    inlet_shares,
+    kassab_diameter_ratio,
+    per_artery_trees,
+)
 
 
 def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
@@ -70,50 +60,11 @@ def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
     return out * physics["A_o"] / physics["A_wv"]
 
 
-def subtree(tree: dict, head: int) -> dict:
-    """The tree below node ``head`` with an inlet of its own at ``head``'s parent node."""
-    from vasc_pipeline import morphometry
-
-    parent = tree["parent"].copy()
-    up = int(parent[head])
-    parent[head] = -1
-    nodes = np.flatnonzero(morphometry.inlet_of(parent) == head)
-    new = np.full(parent.size, -1, dtype=np.int64)
-    new[nodes] = np.arange(1, nodes.size + 1)
-    return {
-        "parent": np.concatenate(([-1], np.where(parent[nodes] >= 0, new[np.maximum(parent[nodes], 0)], 0))),
-        "position": np.vstack([tree["position"][up], tree["position"][nodes]]),
-        "radius": np.concatenate(([0.0], tree["radius"][nodes])),
-        "kind": np.concatenate(([0], tree["kind"][nodes])).astype(np.int8),
-    }
-
-
-def per_artery_trees(tree: dict, inlet_names) -> dict:
-    """RCA, LAD and LCX as separate trees: the LCA's two widest daughters at its first branch point.
-
-    Kassab ordered each artery on its own; the LAD and LCX are the branches of the left
-    main (the LCA's root segment, contracted when the first branch point is on the ostium).
-    """
-    from vasc_pipeline import morphometry
-
-    parent, kind = tree["parent"], tree["kind"]
-    inlets = dict(zip(inlet_names, np.flatnonzero(parent < 0)))
-    contracted, index = morphometry.contract_short_segments(parent, tree["position"], kind)
-    lca = int(np.flatnonzero(index == inlets["LCA"])[0])
-    below = np.flatnonzero(contracted == lca)
-    if below.size == 1:  # the left main: its children are the LAD and LCX
-        below = np.flatnonzero(contracted == below[0])
-    widest = below[np.argsort(-tree["radius"][index[below]], kind="stable")][:2]
-    out = {"RCA": subtree(tree, int(np.flatnonzero(parent == inlets["RCA"])[0]))}
-    out["LAD"], out["LCX"] = (subtree(tree, int(index[b])) for b in widest)
-    return out
-
-
 def placement_row(tissue, tree: dict) -> dict:
     """Where the branch points sit: the share of bifurcations outside the exclusion domain
     (the heart and its cavities), their median distance from it, and the terminal segments'
     median length: all of them, and those hanging from a bifurcation outside."""
-    from vasc_pipeline.tree import KIND_BIFURCATION, KIND_TERMINAL
+    from vasc_pipeline.model.tree import KIND_BIFURCATION, KIND_TERMINAL
 
     kind, position, parent = tree["kind"], tree["position"], tree["parent"]
     up = np.maximum(parent, 0)  # parent -1 (inlets) maps to node 0; only rows of terminals are read
@@ -162,11 +113,11 @@ def row_of(path: Path, root: Path) -> dict:
         "pressure_drop_mean_Pa": float(c["power"] / physics["total_flow"]),
     }
     row.update(placement_row(tissue, tree))
-    inlet_of = morphometry.inlet_of(parent)
+    shares = inlet_shares(parent, kind, tissue.inlet_names)
     for name, inlet in zip(tissue.inlet_names, np.flatnonzero(parent < 0)):
         root_segment = np.flatnonzero(parent == inlet)[0]
         row[f"root_diameter_um_{name}"] = float(2e6 * tree["radius"][root_segment])
-        row[f"terminal_share_{name}"] = float(np.mean(inlet_of[kind == 2] == inlet))
+        row[f"terminal_share_{name}"] = shares[name]
     morph = morphometry.morphometry(parent, tree["position"], tree["radius"], kind)
     dds = morph.sel(scheme="diameter_defined")
     present = (dds.element_count > 0).values
@@ -175,7 +126,7 @@ def row_of(path: Path, root: Path) -> dict:
     row["min_segment_length"] = float(morph.attrs["min_segment_length"])  # m; rows before 2026-11-24: 1e-9
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
     row.update(morphometry_row(morph))
-    # the other reading of Jiang's reassignment (vasc_pipeline.ordering): orders monotone toward the root
+    # the other reading of Jiang's reassignment (vasc_pipeline.reduce.ordering): orders monotone toward the root
     confluence = morphometry_row(
         morphometry.morphometry(parent, tree["position"], tree["radius"], kind, reading="confluence")
     )
@@ -234,7 +185,7 @@ def _pm(entry: dict, name: str, fmt: str = ".3f") -> str:
 
 
 def print_table(table: list[dict]) -> None:
-    print(f"\nmean ± SE over seeds; Kassab LAD diameter ratio per order (orders 5-11): {kassab_ratio():.2f}")
+    print(f"\nmean ± SE over seeds; Kassab LAD diameter ratio per order (orders 5-11): {kassab_diameter_ratio():.2f}")
     print("diameter / length error: mean |log10 model/Kassab| RCA, LAD, LCX; trunk = 11 unless 'aligned'")
     for t in table:
         diam = " ".join(_pm(t, f"diameter_error_{a}") for a in ARTERIES)

@@ -34,7 +34,7 @@ import numpy as np
 from kernel_throughput import ANNEAL_PRESETS, trajectory_problem
 
 from vasc_pipeline import engine, kernel
-from vasc_pipeline.physics import TABLE_EXCLUSION
+from vasc_pipeline.model.physics import TABLE_EXCLUSION
 
 PHASES = {0.05: "start", 0.5: "middle", 0.95: "end"}  # share of the trajectory's moves: name
 

@@ -1,4 +1,4 @@
-"""Proposed moves per second of the annealing kernel on one core (issue 2 and 12 benchmark).
+"""Proposed moves per second of the annealing kernel on one core.
 
 For the heart at N = 500, 1000, 2000, 6000 with every cost term of the paper on (volume,
 power, supply, exclusion; pressure has weight 0 as in the paper), one JSON line per N with

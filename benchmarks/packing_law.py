@@ -1,8 +1,8 @@
 """Supply cost reached by the packing phase alone, against moves per terminal and N.
 
-For the organ-scale work (issue 12): how many packing moves per terminal the heart's supply
+For organ-scale runs (N in the thousands): how many packing moves per terminal the heart's supply
 term needs as N grows (the budget law). For each N, moves per terminal k and seed, the
-packing phase (:mod:`vasc_pipeline.packing`) runs k N proposals from the run's random
+packing phase (:mod:`vasc_pipeline.kernel.packing`) runs k N proposals from the run's random
 initial tree and one JSON line reports C_s at its end and the CPU seconds it took.
 
     python benchmarks/packing_law.py                                # N = 500, 1000, 2000

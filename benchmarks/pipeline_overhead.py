@@ -6,7 +6,7 @@
 Both sides run the same jobs (a small sphere sweep) with the same parallelism:
 
 - direct: ``engine.run`` of every job in a process pool of ``--workers`` processes;
-- pipeline: :func:`vasc_pipeline.orchestrate.run_sweep` on a LocalCluster of ``--workers``
+- pipeline: :func:`vasc_pipeline.pipeline.orchestrate.run_sweep` on a LocalCluster of ``--workers``
   process workers, checkpoints every 30 s (``--checkpoint-seconds``), traces, final stores.
 
 Printed: wall time of each, the end-to-end overhead (cluster start-up, store creation,
@@ -24,7 +24,8 @@ import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-from vasc_pipeline import config, engine, orchestrate, sweep
+from vasc_pipeline import config, engine, sweep
+from vasc_pipeline.pipeline import orchestrate
 
 
 def _direct(job_config: dict, seed: int) -> float:

@@ -54,7 +54,7 @@ SCHEDULES = {"paper": ["anneal=paper"], "paper_cold": ["anneal=paper", "anneal.T
 
 def one_run(args: tuple[str, list[str], str, int, int]) -> dict:
     from vasc_pipeline import config, engine
-    from vasc_pipeline.costs import vascular_exclusion_cost
+    from vasc_pipeline.model.costs import vascular_cost, vascular_exclusion_cost
 
     case, overrides, schedule, steps, seed = args
     cfg = config.compose([*overrides, *SCHEDULES[schedule], f"anneal.steps={steps}", "anneal.trace_every=1000000"])
@@ -69,7 +69,7 @@ def one_run(args: tuple[str, list[str], str, int, int]) -> dict:
         "total": c["total"],
         "supply": c["supply"],
         "vascular_exclusion": vascular_exclusion_cost(c, w_o),
-        "vascular": c["volume"] + c["power"],
+        "vascular": vascular_cost(c),
         "wall_seconds": result.wall_seconds,
     }
 

@@ -1,7 +1,7 @@
 """Time to quality on the heart: wall time, moves per second and final quality per run.
 
 For every requested N, schedule (an ``anneal=`` preset), budget and seed, one run of the
-heart (default tissue and physics) is grown as a pipeline job (:func:`vasc_pipeline.job.run_job`
+heart (default tissue and physics) is grown as a pipeline job (:func:`vasc_pipeline.pipeline.job.run_job`
 in a process pool, one core per run): checkpointed every minute, so an interrupted
 benchmark resumes where it stopped, even in the middle of a long run, when the same
 command is given again. Runs of schedule S at budget B live in ``--out/S/xB/runs/``.
@@ -15,7 +15,8 @@ problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, vo
 share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the
 morphometry against Kassab 1993 (diameter-defined Strahler, element level, orders shifted to
 11): ``diameter_error_<artery>`` and ``length_error_<artery>`` (mean |log10 model/Kassab|
-over the orders present in both), the same with the terminal order aligned on Kassab's order of nearest diameter
+over the orders present in both), the same with the terminal order aligned on Kassab's order
+of nearest diameter
 (``..._terminal_aligned_<artery>``, shift in ``terminal_aligned_shift``), ``n_orders`` and
 ``orders`` (per order: elements, segments per element, mean diameter [um], length [mm]).
 Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
@@ -43,7 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-ARTERIES = ("RCA", "LAD", "LCX")
+from vasc_pipeline.reduce.fidelity import inlet_shares, terminal_aligned
+from vasc_pipeline.reduce.reference import ARTERIES
+
 DEFAULT_SIZES = [500, 1000, 2000]
 LARGE_SIZES = [4000, 6000]
 
@@ -81,19 +84,6 @@ def run_one(j) -> str:
     return j.store
 
 
-def terminal_aligned(morph):
-    """``morph`` with its lowest order moved onto the Kassab (LAD) order of nearest mean element
-    diameter instead of its trunk on order 11 (the fidelity issue's alternative), and the shift."""
-    from vasc_pipeline.reference import kassab_dataset
-
-    dds = morph.sel(scheme="diameter_defined")
-    lowest = int(dds.order.values[(dds.element_count > 0).values].min())
-    lad = kassab_dataset().sel(artery="LAD", level="element")
-    d_low = float(dds.element_diameter_mean.sel(order=lowest))
-    shift = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))]) - lowest
-    return morph.assign_coords(order=morph.order + shift), shift
-
-
 def morphometry_row(morph) -> dict:
     """The morphometry part of a row: ``n_orders``, per order what the errors are made of, and
     the errors against Kassab under both alignments (trunk = 11, terminal order aligned)."""
@@ -123,7 +113,7 @@ def morphometry_row(morph) -> dict:
 def row_of(store_path: str, schedule: str, budget: float) -> dict:
     """The benchmark's row of a complete run store."""
     from vasc_pipeline import morphometry
-    from vasc_pipeline.costs import vascular_exclusion_cost
+    from vasc_pipeline.model.costs import vascular_exclusion_cost
     from vasc_pipeline.store import RunStore
 
     store = RunStore.open(store_path, mode="r")
@@ -147,10 +137,8 @@ def row_of(store_path: str, schedule: str, budget: float) -> dict:
         "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
     }
     tree = store.read_tree()
-    inlet_of = morphometry.inlet_of(tree["parent"])
-    terminals = inlet_of[tree["kind"] == 2]
-    for name, inlet in zip(store.group["tissue"].attrs["inlet_names"], np.flatnonzero(tree["parent"] < 0)):
-        row[f"terminal_share_{name}"] = float(np.mean(terminals == inlet))  # ~0: an abandoned artery
+    for name, share in inlet_shares(tree["parent"], tree["kind"], store.group["tissue"].attrs["inlet_names"]).items():
+        row[f"terminal_share_{name}"] = share  # ~0: an abandoned artery
     row.update(morphometry_row(morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
     row["store"] = store_path
     return row

@@ -4,7 +4,7 @@ branch predictor, both or neither.
 A hot tree's segments (its own, and as many with each node re-paired to a random parent
 position) are taken from a ``fast`` trajectory (``--run-budget`` times the default budget, run
 to ``--at`` of its moves from the seed-0 tree, as ``kernel_profile.py`` reaches its states)
-and traversed with ``kernel._traverse`` four times each, in four orders:
+and traversed with ``kernel.exclusion._traverse`` four times each, in four orders:
 
 - ``cold``: the whole shuffled list four times over; neither the segment's voxels nor its
   walk's branch pattern is left from its previous traversal.
@@ -44,7 +44,7 @@ REPEATS = 4
 @numba.njit(nogil=True)
 def traverse_all(depth_index, depth_values, origin, voxel_size, p0, p1, out):
     for k in range(p0.shape[0]):
-        out[k] = kernel._traverse(
+        out[k] = kernel.exclusion._traverse(
             depth_index,
             depth_values,
             origin[0],

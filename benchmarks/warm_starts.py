@@ -1,4 +1,4 @@
-"""Warm starts against the plain anneal at equal moves, on the heart (issue 12, deliverable 2).
+"""Warm starts against the plain anneal at equal moves, on the heart.
 
 Each strategy spends the same number of proposals, ``--budget`` times the default of
 ``anneal=fast`` at N, and ends with the same polish:
@@ -13,7 +13,7 @@ Each strategy spends the same number of proposals, ``--budget`` times the defaul
   calibrated on it (``anneal.accept_start``, ``--fine`` overrides);
 - ``packed_cco``: the packing phase alone (supply only, terminal moves,
   ``--packing-per-terminal`` proposals each), the CCO tree grown on the packed sites
-  (:func:`vasc_pipeline.cco.grow_tree`), then the tree annealed with the remaining moves,
+  (:func:`vasc_pipeline.engine.cco.grow_tree`), then the tree annealed with the remaining moves,
   the supply term at its true weight throughout (``anneal.supply_T_start=null``), so the
   terminals keep their packing while the tree is searched;
 - ``late_exclusion``: ``anneal=fast`` with the exclusion term off (no traversals, the
@@ -99,7 +99,7 @@ def two_stage_row(start: float, middle: float, first_stage: str, problem, state,
 
 def costs(problem, state) -> dict[str, float]:
     from vasc_pipeline import engine
-    from vasc_pipeline.costs import vascular_exclusion_cost
+    from vasc_pipeline.model.costs import vascular_exclusion_cost
 
     c = engine.running_costs(problem, state)
     return {"C_s": c["supply"], "vascular_W": vascular_exclusion_cost(c, problem.physics.weights[0])}
@@ -112,7 +112,7 @@ def split_tree(coarse, problem, offset: float, seed: int):
     tissue; at the bifurcation if none does). Coarse bifurcations keep their positions (clipped
     into the finer grid's box)."""
     from vasc_pipeline import kernel
-    from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals
+    from vasc_pipeline.model.tree import Tree, check_tree, children_from_parent, count_terminals
 
     k, m = coarse.n_inlets, coarse.n_terminals
     n = 2 * m
@@ -164,7 +164,7 @@ def run_plain(n, seed, total, args):
 
 def run_split(n, seed, total, args):
     from vasc_pipeline import engine
-    from vasc_pipeline.rng import seed_state
+    from vasc_pipeline.model.rng import seed_state
 
     start = time.perf_counter()
     coarse_steps = int(round(args.coarse_share * total))
@@ -183,8 +183,8 @@ def run_split(n, seed, total, args):
 
 def run_packed_cco(n, seed, total, args):
     from vasc_pipeline import engine
-    from vasc_pipeline.cco import grow_tree
-    from vasc_pipeline.rng import seed_state
+    from vasc_pipeline.engine.cco import grow_tree
+    from vasc_pipeline.model.rng import seed_state
 
     start = time.perf_counter()
     pack_steps = int(round(args.packing_per_terminal * n))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vasc_pipeline import config, costs, engine, job, kernel, sweep
-from vasc_pipeline.tree import check_tree
+from vasc_pipeline.model.tree import check_tree
 
 
 def make_problem(*overrides: str):
@@ -105,6 +105,25 @@ FAST_ONE_EXPONENTIAL = (
     "anneal.supply_phase=0.5",
     "anneal.full_width_phase=0.25",
 )
+# `fast` as of 2026-12-01, spelled out on the frozen `fast_v1`: for tests that need "a good schedule
+# with every feature on" (coarse map, cold part, adapted steps, neighbour swaps, supply schedule),
+# not the preset itself, so that a retune of `fast` leaves them alone. Overrides after it win.
+FAST_2026_12 = (
+    "anneal=fast_v1",
+    "anneal.acceptance_target=0.1",
+    "anneal.coarse_exclusion_factor=2",
+    "anneal.coarse_exclusion_phase=0.4",
+    "anneal.cold_from=0.5",
+    "anneal.cold_share=0.2",
+    "anneal.full_width_phase=0.4",
+    "anneal.neighbour_cell=2.0",
+    "anneal.p_swap=0.3",
+    "anneal.steps_at_1000=6.25e7",
+    "anneal.steps_exponent=1.7",
+    "anneal.supply_phase=0.8",
+)
+
+
 # `fast` sums the exclusion term on a coarse map over its first 40 % of moves: tests that call
 # the kernel on a state directly with ``problem.model`` need the true map from the start.
 TRUE_EXCLUSION_MAP = ("anneal.coarse_exclusion_factor=null", "anneal.coarse_exclusion_phase=null")

@@ -1,4 +1,4 @@
-"""``tissue.bifurcation_reach``: bifurcations kept within a distance of the exclusion domain (issue 13)."""
+"""``tissue.bifurcation_reach``: bifurcations kept within a distance of the exclusion domain."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from helpers import (
 
 from vasc_pipeline import engine, kernel
 from vasc_pipeline.config import ConfigError, compose, to_run_config, validate
-from vasc_pipeline.tree import KIND_BIFURCATION
+from vasc_pipeline.model.tree import KIND_BIFURCATION
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")
 

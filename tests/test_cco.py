@@ -1,4 +1,4 @@
-"""CCO (vasc_pipeline.cco): the local optimum, the incremental cost, the growth against a
+"""CCO (vasc_pipeline.engine.cco): the local optimum, the incremental cost, the growth against a
 plain NumPy twin, invariants, determinism, stored = recomputed costs, the exhaustive
 optimum never above CCO, the pipeline and the reduction with both methods."""
 
@@ -15,15 +15,16 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from vasc_pipeline import cco, config, engine, job, orchestrate, store, sweep
+from vasc_pipeline import cco, config, engine, job, store, sweep
 from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.costs import full_costs
-from vasc_pipeline.geometry import optimal_bifurcations, vascular_cost, vascular_weights
-from vasc_pipeline.physics import cost_tables
-from vasc_pipeline.rng import seed_state
-from vasc_pipeline.topology_search import best_topology
-from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
+from vasc_pipeline.model.costs import full_costs
+from vasc_pipeline.model.geometry import optimal_bifurcations, vascular_cost, vascular_weights
+from vasc_pipeline.model.physics import cost_tables
+from vasc_pipeline.model.rng import seed_state
+from vasc_pipeline.model.topology_search import best_topology
+from vasc_pipeline.model.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
+from vasc_pipeline.pipeline import orchestrate
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -289,6 +290,7 @@ def test_anneal_init_cco_starts_from_the_cco_tree():
 # The pipeline: run stores, resume, reduction with both methods
 
 
+@pytest.mark.integration
 def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     out = tmp_path / "both"
     grid = [
@@ -351,6 +353,7 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
 # The benchmark cannot rot
 
 
+@pytest.mark.integration
 def test_comparison_benchmark_quick(tmp_path):
     proc = subprocess.run(
         [

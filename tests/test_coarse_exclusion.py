@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import (
+    FAST_2026_12,
     TRUE_EXCLUSION_MAP,
     assert_block_splits_bit_identical,
     assert_killed_job_resumes_bit_identically,
@@ -15,7 +16,7 @@ from helpers import (
 
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.tissue import ExclusionGrid
+from vasc_pipeline.model.tissue import ExclusionGrid
 
 COARSE = ("anneal.coarse_exclusion_factor=2", "anneal.coarse_exclusion_phase=0.4")
 
@@ -42,7 +43,7 @@ def test_coarse_sums_approximate_the_true_ones_on_the_heart(factor):
     """Long segments through the heart (an initial tree's): the coarse map's sums in the true
     units, with no weight changed. Each is within a small factor of the true sum, and over the
     tree within 30 % (the 6th power makes single segments scatter)."""
-    problem = make_problem("tissue=heart", "n_terminals=300", "anneal=fast")
+    problem = make_problem("tissue=heart", "n_terminals=300", *FAST_2026_12)
     state = engine.initial_state(problem, 0)
     coarse = problem.model._replace(**kernel.exclusion_fields(problem.tissue.exclusion_grid.coarsened(factor)))
     pos, k = state.position, problem.model.n_inlets
@@ -79,7 +80,7 @@ def test_fast_sums_its_first_40_percent_on_a_twice_coarser_map_and_the_other_sch
 
 def test_running_sums_follow_the_coarse_map_then_the_true_one():
     steps = 1_000_000
-    problem = make_problem("tissue=heart", "n_terminals=120", "anneal=fast", f"anneal.steps={steps}", *COARSE)
+    problem = make_problem("tissue=heart", "n_terminals=120", *FAST_2026_12, f"anneal.steps={steps}", *COARSE)
     assert problem.coarse_steps == 400_000
     state = engine.initial_state(problem, 5)
     _running_equals(problem, problem.coarse_model, state)
@@ -91,30 +92,31 @@ def test_running_sums_follow_the_coarse_map_then_the_true_one():
     engine.run_block(problem, state, steps - 400_000)
     _running_equals(problem, problem.model, state)
     # The same run on the true map throughout: the same schedule, another trajectory.
-    plain = make_problem("tissue=heart", "n_terminals=120", "anneal=fast", f"anneal.steps={steps}", *TRUE_EXCLUSION_MAP)
+    plain = make_problem("tissue=heart", "n_terminals=120", *FAST_2026_12, f"anneal.steps={steps}", *TRUE_EXCLUSION_MAP)
     reference = engine.initial_state(plain, 5)
     np.testing.assert_array_equal(reference.schedule, state.schedule)
     assert plain.coarse_model is None and plain.coarse_steps == 0
 
 
 def test_block_splits_and_checkpoint_round_trips_across_the_switch_are_bit_identical():
-    problem = make_problem("tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", *COARSE)
+    problem = make_problem("tissue=sphere", "n_terminals=40", *FAST_2026_12, "anneal.steps=60000", *COARSE)
     # The coarse part ends at 24_000, between blocks.
     assert_block_splits_bit_identical(problem, 5, (1, 9_999, 14_000, 0, 7_000, 2, 28_998))
     # With packing first the coarse part follows it: the same across a split inside either part.
     packed = make_problem(
-        "tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", *COARSE,
+        "tissue=sphere", "n_terminals=40", *FAST_2026_12, "anneal.steps=60000", *COARSE,
         "anneal.packing_steps_per_terminal=250",
     )  # fmt: skip
     assert packed.coarse_steps == 10_000 + 20_000
     assert_block_splits_bit_identical(packed, 2, (9_000, 2_000, 20_000, 29_000))
 
 
+@pytest.mark.integration
 def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):
     overrides = [
         "tissue=sphere",
         "n_terminals=300",
-        "anneal=fast",
+        *FAST_2026_12,
         "anneal.steps=1000000",
         "anneal.coarse_exclusion_factor=3",
         "anneal.coarse_exclusion_phase=0.6",

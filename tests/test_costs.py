@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import make_problem
+from helpers import FAST_2026_12, make_problem
 
 from vasc_pipeline import costs, engine, kernel, tissue
 
@@ -226,9 +226,9 @@ def test_prefetching_ahead_changes_no_traversal_sum(sphere_problem):
 
 def test_prefetching_changes_no_run():
     """Both prefetches (the depth map ahead of a traversal, the count map's rows under a moving
-    terminal's spheres) are hints: a short `fast` heart run, coarse map and supply shells
+    terminal's spheres) are hints: a short heart run on FAST_2026_12, coarse map and supply shells
     included, ends in the same arrays with them and without."""
-    problem = make_problem("tissue=heart", "n_terminals=150", "anneal=fast", "anneal.steps=200000")
+    problem = make_problem("tissue=heart", "n_terminals=150", *FAST_2026_12, "anneal.steps=200000")
     assert problem.model.prefetch_supply and problem.coarse_model is not None
     final = []
     for fields in ({}, {"prefetch_lead": 0.0, "prefetch_supply": False}):

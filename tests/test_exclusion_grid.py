@@ -13,10 +13,10 @@ from helpers import assert_running_equals_full, make_problem
 
 from vasc_pipeline import config, costs, engine, job, kernel, sweep
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.physics import cost_tables
+from vasc_pipeline.model.physics import cost_tables
+from vasc_pipeline.model.tissue import TissueError, build_tissue
+from vasc_pipeline.model.tissue.grid import resampled_exclusion_grid
 from vasc_pipeline.store import RunStore
-from vasc_pipeline.tissue import TissueError, build_tissue
-from vasc_pipeline.tissue.grid import resampled_exclusion_grid
 
 BOX = (0.04, 0.04, 0.02)  # m
 EXCLUSION_VOXEL = 1.5e-3  # m

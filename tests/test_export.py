@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from vasc_pipeline import config, job, store, sweep
-from vasc_pipeline.export import export_run, export_tree, terminals_downstream, tree_table
+from vasc_pipeline.reduce.export import export_run, export_tree, terminals_downstream, tree_table
 
 GAMMA = 3.0
 R_T = 1e-4

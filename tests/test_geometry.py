@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_running_equals_full, make_problem
+from helpers import FAST_2026_12, assert_running_equals_full, make_problem
 from scipy.optimize import minimize
 
-from vasc_pipeline import engine, finish, geometry, kernel, topology_search
-from vasc_pipeline.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
+from vasc_pipeline import engine, kernel
+from vasc_pipeline.engine import polish as finish
+from vasc_pipeline.model import geometry, topology_search
+from vasc_pipeline.model.tree import KIND_BIFURCATION, Tree, children_from_parent, count_terminals
 
 # --------------------------------------------------------------------------------------
 # Helpers
@@ -196,7 +198,7 @@ def test_contracting_at_the_first_sign_of_a_kink_reaches_the_same_optimum_in_far
     solver contracts the short segments as soon as a line search shows a kink (a step below
     KINK_STEP), several at once; against the plain path (one shortest segment after a
     stalled Newton run) it must end at the same optimum, with the same contracted segments."""
-    problem = make_problem("tissue=heart", "n_terminals=200", "anneal=fast", "anneal.steps=1000000")
+    problem = make_problem("tissue=heart", "n_terminals=200", *FAST_2026_12, "anneal.steps=1000000")
     state = engine.initial_state(problem, seed=0)
     engine.run_block(problem, state, 1_000_000)
     tree = engine.tree_of(problem, state)

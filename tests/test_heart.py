@@ -1,4 +1,4 @@
-"""The coronary substrate (vasc_pipeline.tissue.heart): mass, shape, inlets, bad input."""
+"""The coronary substrate (vasc_pipeline.model.tissue.heart): mass, shape, inlets, bad input."""
 
 from __future__ import annotations
 
@@ -18,8 +18,8 @@ from vasc_pipeline.config import (
     to_run_config,
     validate,
 )
-from vasc_pipeline.identity import config_hash
-from vasc_pipeline.tissue import TISSUES, TissueError, build_tissue, heart
+from vasc_pipeline.config.identity import config_hash
+from vasc_pipeline.model.tissue import TISSUES, TissueError, build_tissue, heart
 
 TARGET_G = 218.0
 DENSITY = 1.06e3
@@ -75,7 +75,7 @@ def test_dimensions_physiological(dims):
 
 
 def test_via_build_tissue_ignores_other_keys(caplog):
-    with caplog.at_level(logging.INFO, logger="vasc_pipeline.tissue.heart"):
+    with caplog.at_level(logging.INFO, logger="vasc_pipeline.model.tissue.heart"):
         t = build_tissue(
             "heart", 300, mass_g=218.0, density=1.06e3, voxel_size=None, radius=0.02, side=0.1, q_required=None
         )
@@ -218,10 +218,10 @@ def test_exclude_cavities_false_is_the_myocardium_only_model(tissue1000):
 
 
 def test_large_vessels_stay_out_of_the_cavities_after_a_fixed_seed_anneal():
-    """N = 200, seed 0, the default schedule: the cavity share is ~0 (the fidelity issue's
+    """N = 200, seed 0, the default schedule: the cavity share is ~0 (the fidelity work's
     target is < 0.5 %); with the myocardium-only map the same run puts ~30 % in the cavities."""
     from vasc_pipeline import config, engine
-    from vasc_pipeline.costs import cavity_share
+    from vasc_pipeline.model.costs import cavity_share
 
     result = engine.run(config.compose(["n_terminals=200"]), seed=0)
     share = result.statistics["cavity_share"]
@@ -346,7 +346,7 @@ def test_bad_heart_options_are_refused_before_any_job(tmp_path, key, value, mess
     with pytest.raises(TissueError, match=message):
         heart.heart_tissue(300, **{key: value})
     if isinstance(value, float):  # and by the command's planning, before anything is written
-        from vasc_pipeline.planning import plan
+        from vasc_pipeline.pipeline.planning import plan
 
         with pytest.raises(TissueError, match=message):
             plan(compose([f"tissue.{key}={value}", f"output_dir={tmp_path / 'out'}", "n_terminals=300"]))

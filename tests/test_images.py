@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 from helpers import ENV, REPO, make_problem
-
-from vasc_pipeline.config import ConfigError
 from vasc_pipeline.tissue import TissueError, build_tissue
 from vasc_pipeline.tissue import images as img
+
+from vasc_pipeline.config import ConfigError
 
 nibabel = pytest.importorskip("nibabel", reason="nibabel (pip install -e '.[test]') reads NIfTI")
 nrrd = pytest.importorskip("nrrd", reason="pynrrd (pip install -e '.[test]') reads NRRD")
@@ -100,7 +100,7 @@ def test_anisotropic_and_oblique_images_are_refused_with_their_geometry(tmp_path
 
 def test_the_shipped_heart_round_trips_through_a_label_map(tmp_path):
     code = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline.tissue.images", str(tmp_path / "heart.nii.gz"), "200"],
+        [sys.executable, "-m", "vasc_pipeline.model.tissue.images", str(tmp_path / "heart.nii.gz"), "200"],
         env=ENV, cwd=REPO, capture_output=True, text=True, timeout=240,
     )  # fmt: skip
     assert code.returncode == 0, code.stderr

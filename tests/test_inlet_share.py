@@ -1,4 +1,4 @@
-"""``tissue.inlet_share`` and ``tissue.inlet_assignment``: which terminals each inlet feeds (issue 13)."""
+"""``tissue.inlet_share`` and ``tissue.inlet_assignment``: which terminals each inlet feeds."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from helpers import assert_running_equals_full, make_problem
 
 from vasc_pipeline import engine
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.topology import inlet_of
-from vasc_pipeline.tree import TreeError, inlet_counts, nearest_inlets
+from vasc_pipeline.model.topology import inlet_of
+from vasc_pipeline.model.tree import TreeError, inlet_counts, nearest_inlets
 
 
 def terminals_per_inlet(problem, state) -> list[int]:

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasc_pipeline import engine, kernel, physics
-from vasc_pipeline.tree import count_terminals
+from vasc_pipeline.model.tree import count_terminals
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
 
@@ -206,7 +206,7 @@ def test_early_rejection_changes_no_decision(overrides):
 
 
 def test_new_segment_traversal_rejects_on_its_partial_sum_or_traverses_in_full():
-    """kernel._new_exclusion's two branches, forced: a cap far below the segment's sum stops
+    """kernel.moves._new_exclusion's two branches, forced: a cap far below the segment's sum stops
     the traversal; a bound that then rejects returns the partial sum with the rejection, one
     that does not (a downhill move) returns the full sum, as if no cap had been set."""
     problem = make_problem("tissue=sphere", "n_terminals=50", "anneal.steps=1000")
@@ -220,7 +220,7 @@ def test_new_segment_traversal_rejects_on_its_partial_sum_or_traverses_in_full()
     rng = np.zeros(4, dtype=np.uint64)  # not drawn from: u is given
     temp, u = 1e-12, 0.5  # cap = T ln 2 / slope: a tiny fraction of the sum
     for vascular, rejected in ((1e-9, True), (-1e300, False)):
-        s, was_rejected, u_out = kernel._new_exclusion(
+        s, was_rejected, u_out = kernel.moves._new_exclusion(
             model, p0, p1, n, temp, rng, u, 0.0, vascular, 0.0, 0.0, 0.0, 0.0, 0.0, False
         )
         assert was_rejected == rejected and u_out == u

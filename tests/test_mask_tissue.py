@@ -10,7 +10,7 @@ import zarr
 from helpers import assert_running_equals_full, make_problem
 
 from vasc_pipeline import config, engine, job, physics, store, sweep, tissue
-from vasc_pipeline.tree import check_tree
+from vasc_pipeline.model.tree import check_tree
 
 H = 1e-3  # m
 ORIGIN = [0.004, -0.002, 0.001]  # m: [x, y, z] of the centre of voxel [0, 0, 0]
@@ -132,7 +132,7 @@ def test_inlets_may_be_written_as_whole_numbers():
 
 
 def test_a_terminal_sites_path_that_is_a_directory_names_the_field(tmp_path):
-    from vasc_pipeline.tree import TreeError, load_terminal_sites
+    from vasc_pipeline.model.tree import TreeError, load_terminal_sites
 
     with pytest.raises(TreeError, match=r"terminals\.path: cannot read .*Is a directory"):
         load_terminal_sites(str(tmp_path), tissue=None)

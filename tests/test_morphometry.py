@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasc_pipeline.morphometry import (
+from vasc_pipeline.reduce.morphometry import (
     asymmetry_ratios,
     asymmetry_statistics,
     check_tree_arrays,

@@ -1,4 +1,4 @@
-"""The packing phase (vasc_pipeline.packing): kernel against its NumPy twin, the end of the
+"""The packing phase (vasc_pipeline.kernel.packing): kernel against its NumPy twin, the end of the
 phase, determinism across block splits, checkpoints and a SIGKILL, and bad input."""
 
 from __future__ import annotations
@@ -6,19 +6,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import (
+    FAST_2026_12,
     assert_block_splits_bit_identical,
     assert_killed_job_resumes_bit_identically,
     assert_running_equals_full,
     make_problem,
 )
 
-from vasc_pipeline import config, engine, kernel, packing
+from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.kernel import packing
 
 PACKED = (
     "tissue=sphere",
     "n_terminals=40",
-    "anneal=fast",
+    *FAST_2026_12,
     "anneal.packing_steps_per_terminal=500",
     "anneal.steps=60000",
     "anneal.trace_every=5000",
@@ -27,7 +29,7 @@ PACKED = (
 
 def test_pack_block_equals_its_numpy_twin_move_for_move():
     problem = make_problem(
-        "tissue=sphere", "n_terminals=12", "anneal=fast", "anneal.packing_steps_per_terminal=100", "anneal.steps=5000"
+        "tissue=sphere", "n_terminals=12", *FAST_2026_12, "anneal.packing_steps_per_terminal=100", "anneal.steps=5000"
     )
     fast, slow = engine.initial_state(problem, 3), engine.initial_state(problem, 3)
     p = problem.physics
@@ -83,11 +85,12 @@ def test_block_splits_and_checkpoint_round_trips_across_the_phase_are_bit_identi
     assert_block_splits_bit_identical(problem, 5, (1, 9_999, 9_999, 2, 17_000, 22_999))
 
 
+@pytest.mark.integration
 def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
     overrides = [
         "tissue=sphere",
         "n_terminals=300",
-        "anneal=fast",
+        *FAST_2026_12,
         "anneal.packing_steps_per_terminal=3000",
         "anneal.steps=1000000",
         "anneal.trace_every=20000",
@@ -116,5 +119,5 @@ def test_bad_packing_settings_name_the_field(overrides, message):
 
 
 def test_budget_law_exponent():
-    cfg = config.to_run_config(config.compose(["n_terminals=2000", "anneal=fast", "anneal.steps_exponent=1.5"]))
+    cfg = config.to_run_config(config.compose(["n_terminals=2000", *FAST_2026_12, "anneal.steps_exponent=1.5"]))
     assert config.scheduled_steps(cfg) == round(6.25e7 * 2.0**1.5)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vasc_pipeline import costs, physics
-from vasc_pipeline.tree import Tree
+from vasc_pipeline.model.tree import Tree
 
 
 def coronary(**kw):

@@ -26,8 +26,11 @@ import pytest
 import xarray as xr
 from helpers import ENV, TIMEOUT, cli, finish, free_port  # noqa: E402
 
-from vasc_pipeline import config, engine, job, orchestrate, store, sweep
-from vasc_pipeline.tree import Tree, check_tree
+from vasc_pipeline import config, engine, job, store, sweep
+from vasc_pipeline.model.tree import Tree, check_tree
+from vasc_pipeline.pipeline import orchestrate
+
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
 SMALL = [
     "+sweep=smoke",

@@ -2,7 +2,7 @@
 values, the comparison table, figures, tree exports, the sweep hook and ``+stage=reduce``.
 
 The sweeps are tiny (16/24 terminals, 5e4 proposals) and run in this process with
-:func:`vasc_pipeline.job.run_job`, which writes the same stores as a Dask sweep.
+:func:`vasc_pipeline.pipeline.job.run_job`, which writes the same stores as a Dask sweep.
 """
 
 from __future__ import annotations
@@ -22,10 +22,13 @@ import pandas as pd
 import pytest
 import xarray as xr
 
-from vasc_pipeline import config, job, morphometry, orchestrate, store, sweep
+from vasc_pipeline import config, job, morphometry, store, sweep
 from vasc_pipeline import reduce as reduce_mod
-from vasc_pipeline.reference import kassab_csv_path
-from vasc_pipeline.summary import write_summary
+from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.reduce.reference import kassab_csv_path
+from vasc_pipeline.reduce.summary import write_summary
+
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
 REPO = Path(__file__).resolve().parents[1]
 GRID = [
@@ -85,7 +88,7 @@ def test_lowest_cost_seed_is_chosen_in_every_cell(swept, summary):
 
 
 def test_trunk_spread_measures_how_alike_the_seeds_trees_are(swept, summary):
-    from vasc_pipeline.similarity import main_trunks, trunk_distance
+    from vasc_pipeline.reduce.similarity import main_trunks, trunk_distance
 
     _, jobs, _, _ = swept
     spread = summary["morphometry"]["trunk_spread"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vasc_pipeline.reference import (
+from vasc_pipeline.reduce.reference import (
     ARTERIES,
     KASSAB_CSV_NAME,
     LEVELS,

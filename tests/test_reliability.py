@@ -23,10 +23,13 @@ import pytest
 import zarr
 from helpers import ENV, FAST_ONE_EXPONENTIAL, TIMEOUT, TINY_RUN, cli, finish, free_port
 
-from vasc_pipeline import config, engine, job, orchestrate, store, sweep
-from vasc_pipeline.cluster import walltime_seconds, worker_lifetime
+from vasc_pipeline import config, engine, job, store, sweep
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.tissue import TissueError
+from vasc_pipeline.model.tissue import TissueError
+from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline.cluster import walltime_seconds, worker_lifetime
+
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
 THREE_SEEDS = ["+sweep=smoke", "sweep.n_terminals=[16]", "sweep.m_b=[641.3]", "sweep.seeds=[0,1,2]"]
 

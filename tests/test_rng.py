@@ -1,6 +1,6 @@
 import numpy as np
 
-from vasc_pipeline import rng
+from vasc_pipeline.model import rng
 
 
 def test_numba_generator_matches_plain_python_reference():

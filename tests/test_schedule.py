@@ -15,11 +15,12 @@ from helpers import (
     reference_swap,
 )
 
-from vasc_pipeline import config, costs, engine, job, kernel, sweep, topology_search
+from vasc_pipeline import config, costs, engine, job, kernel, sweep
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.physics import cost_tables
+from vasc_pipeline.model import topology_search
+from vasc_pipeline.model.physics import cost_tables
+from vasc_pipeline.model.tree import Tree, check_tree, children_from_parent, count_terminals
 from vasc_pipeline.store import RunStore
-from vasc_pipeline.tree import Tree, check_tree, children_from_parent, count_terminals
 
 
 def cells_consistent(problem, state):
@@ -161,13 +162,13 @@ def test_step_adaptation_by_hand():
     width = state.step_size[1] = 0.5 * model.step_max[1]
     c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] = model.adapt_window - 1
     c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] = model.adapt_window // 10 - 1
-    kernel._adapt_step(model, state, 1, True)  # the window's last proposal: acceptance 0.1
+    kernel.moves._adapt_step(model, state, 1, True)  # the window's last proposal: acceptance 0.1
     assert state.step_size[1] == pytest.approx(width * math.exp(2 * (0.1 - model.acceptance_target)))
     assert c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] == c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] == 0
     c[kernel.COUNTER_WINDOW_BIFURCATION_PROPOSED] = model.adapt_window - 1
     c[kernel.COUNTER_WINDOW_BIFURCATION_ACCEPTED] = model.adapt_window - 1
-    kernel._adapt_step(model, state, 1, True)  # acceptance 1 widens, up to the configured cap
-    kernel._adapt_step(model, state, 1, True)
+    kernel.moves._adapt_step(model, state, 1, True)  # acceptance 1 widens, up to the configured cap
+    kernel.moves._adapt_step(model, state, 1, True)
     assert state.step_size[1] <= model.step_max[1]
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vasc_pipeline.similarity import main_trunks, resample_polyline, trunk_distance, trunk_spread
+from vasc_pipeline.reduce.similarity import main_trunks, resample_polyline, trunk_distance, trunk_spread
 
 
 def two_inlet_tree(shift=0.0):
@@ -48,7 +48,7 @@ def test_trunk_spread_over_pairs_of_trees():
 
 
 def test_tortuosity_is_arc_over_chord():
-    from vasc_pipeline.similarity import tortuosity
+    from vasc_pipeline.reduce.similarity import tortuosity
 
     assert tortuosity([[0, 0, 0], [1, 0, 0], [3, 0, 0]]) == pytest.approx(1.0)
     assert tortuosity([[0, 0, 0], [1, 1, 0], [2, 0, 0]]) == pytest.approx(np.sqrt(2))

@@ -16,7 +16,7 @@ import zarr
 
 from vasc_pipeline import config, engine, job, store, sweep
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.tree import Tree, check_tree
+from vasc_pipeline.model.tree import Tree, check_tree
 
 TINY = [
     "tissue=plane2d",

@@ -1,4 +1,4 @@
-"""Supply shells (kernel._shell_*): a small terminal move's supply change from the voxels near
+"""Supply shells (kernel.supply._shell_*): a small terminal move's supply change from the voxels near
 its sphere's surface equals the row-by-row change and the NumPy reference, bit for bit, and a
 run with shells is the run without them."""
 
@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import assert_block_splits_bit_identical, assert_running_equals_full, make_problem
+from helpers import FAST_2026_12, assert_block_splits_bit_identical, assert_running_equals_full, make_problem
 
 from vasc_pipeline import costs, engine, kernel
 
@@ -33,7 +33,7 @@ def _shell(supply, rho, centre, width):
     """(voxels, band ends, width) of the shell around ``centre``."""
     voxels = np.zeros((kernel.shell_capacity(rho, width), 3), dtype=np.int16)
     bands = np.zeros(kernel.SHELL_BANDS, dtype=np.int64)
-    n = kernel._shell_build(supply, rho, *centre, width, voxels, bands)
+    n = kernel.supply._shell_build(supply, rho, *centre, width, voxels, bands)
     assert n == bands[-1] >= 0
     return voxels, bands, width
 
@@ -61,7 +61,7 @@ def test_shell_lists_every_tissue_voxel_near_the_surface_band_by_band(rho):
                 first = end
     # more than fit: not a shell
     bands = np.zeros(kernel.SHELL_BANDS, dtype=np.int64)
-    assert kernel._shell_build(supply, rho, 12.0, 13.0, 11.0, 0.3, np.zeros((5, 3), dtype=np.int16), bands) == -1
+    assert kernel.supply._shell_build(supply, rho, 12.0, 13.0, 11.0, 0.3, np.zeros((5, 3), dtype=np.int16), bands) == -1
 
 
 def _change_both_ways(supply, rho, shell, centre, old, new):
@@ -70,10 +70,10 @@ def _change_both_ways(supply, rho, shell, centre, old, new):
     change is the same over the bands the move reaches and over all of them."""
     reach = np.linalg.norm(old - centre) + np.linalg.norm(new - old) + 1e-6
     by_shell, by_rows = supply.copy(), supply.copy()
-    d_shell = kernel._shell_change(by_shell, rho, *shell, reach, *old, *new, True)
-    d_rows = kernel._sphere_rows(by_rows, rho, *old, *new, True)
+    d_shell = kernel.supply._shell_change(by_shell, rho, *shell, reach, *old, *new, True)
+    d_rows = kernel.supply._sphere_rows(by_rows, rho, *old, *new, True)
     np.testing.assert_array_equal(by_shell, by_rows)
-    assert d_shell == kernel._shell_change(supply, rho, *shell, shell[2], *old, *new, False)
+    assert d_shell == kernel.supply._shell_change(supply, rho, *shell, shell[2], *old, *new, False)
     return d_shell, d_rows
 
 
@@ -124,8 +124,8 @@ def test_shell_change_on_exact_ties():
 
 
 def _late_problem(*overrides):
-    """A short `fast` run whose adapted terminal steps fall below the shells' width."""
-    return make_problem(*overrides, "anneal=fast", "anneal.steps=300000")
+    """A short run on FAST_2026_12 whose adapted terminal steps fall below the shells' width."""
+    return make_problem(*overrides, *FAST_2026_12, "anneal.steps=300000")
 
 
 @pytest.mark.parametrize(

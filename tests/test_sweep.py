@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 from helpers import TINY_RUN, cli, finish
 
-from vasc_pipeline import config, orchestrate, store, sweep
+from vasc_pipeline import config, store, sweep
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.pipeline import orchestrate
 
 SWEEPS = sorted(p.stem for p in (config.CONFIG_DIR / "sweep").glob("*.yaml"))
 
@@ -53,6 +54,7 @@ def test_sweep_axes_without_a_sweep_run_the_base_config_on_them(tmp_path):
         sweep.expand(config.compose(["sweep.seeds=[]"]))
 
 
+@pytest.mark.integration
 def test_the_command_takes_sweep_axes_without_a_sweep(tmp_path):
     """The README's ``sweep.seeds=[...]`` example as a user types it (a dry run: nothing runs)."""
     code, output = finish(cli(*TINY_RUN, f"output_dir={tmp_path}", "sweep.seeds=[0,1]", "cluster.dry_run=true"))

@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
+pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
+
 REPO = Path(__file__).resolve().parents[1]
 TINY = [
     "sweep.seeds=[0]",

@@ -1,6 +1,6 @@
 """The 0D export (svZeroDSolver's input format): a hand-built tree's network by hand, the real
 solver on an annealed tree against the package's own Poiseuille solution, and the exports the
-reduction and ``python -m vasc_pipeline.zerod`` write."""
+reduction and ``python -m vasc_pipeline.reduce.zerod`` write."""
 
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ import sys
 import numpy as np
 import pytest
 from helpers import ENV, REPO
-
-from vasc_pipeline import config, costs, engine, job, sweep, zerod
 from vasc_pipeline.physics import Physics, cost_tables
+
+from vasc_pipeline import config, costs, engine, job, sweep
+from vasc_pipeline.reduce import zerod
 
 svzerod = pytest.importorskip("svzerod", reason="svzerod (pip install -e '.[test]') runs the exported networks")
 
@@ -91,13 +92,13 @@ def test_the_reduction_and_the_command_write_the_network(tmp_path):
     model = json.loads(written.read_text())
     assert len(model["vessels"]) == 2 * 16 - 1 and len(model["junctions"]) == 16 - 1
     by_command = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline.zerod", j.store, str(tmp_path / "mine")],
+        [sys.executable, "-m", "vasc_pipeline.reduce.zerod", j.store, str(tmp_path / "mine")],
         env=ENV, cwd=REPO, capture_output=True, text=True, timeout=240,
     )  # fmt: skip
     assert by_command.returncode == 0, by_command.stderr
     assert json.loads((tmp_path / "mine" / f"{j.run_id}.0d.json").read_text()) == model
     missing = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline.zerod", str(tmp_path / "nope.zarr")],
+        [sys.executable, "-m", "vasc_pipeline.reduce.zerod", str(tmp_path / "nope.zarr")],
         env=ENV, cwd=REPO, capture_output=True, text=True, timeout=240,
     )  # fmt: skip
-    assert missing.returncode == 1 and missing.stderr.startswith("vasc_pipeline.zerod: "), missing.stderr
+    assert missing.returncode == 1 and missing.stderr.startswith("vasc_pipeline.reduce.zerod: "), missing.stderr

@@ -1,7 +1,7 @@
 """Numba flags in one place (STYLE: one switch for cache/nogil/fastmath), and the one
 intrinsic the kernel needs that numba lacks (a cache prefetch).
 
-``nogil=True`` keeps Dask worker heartbeats alive during long kernel calls (SPEC section 8);
+``nogil=True`` keeps Dask worker heartbeats alive during long kernel calls;
 ``fastmath`` stays off so that incremental and full costs agree and runs are bit-identical.
 """
 

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from vasc_pipeline.morphometry import compare_with_kassab, inlet_of, morphometry
-from vasc_pipeline.ordering import READINGS
+from vasc_pipeline.reduce.morphometry import compare_with_kassab, inlet_of, morphometry
+from vasc_pipeline.reduce.ordering import READINGS
 
 HERE = Path(__file__).resolve().parent
 SCHEME = "diameter_defined"
@@ -100,7 +100,7 @@ def size_scan(summary: xr.DataTree) -> None:
 
 
 def size_scan_readings(summary: xr.DataTree) -> None:
-    """The best trees under both readings of Jiang's reassignment (vasc_pipeline.ordering)."""
+    """The best trees under both readings of Jiang's reassignment (vasc_pipeline.reduce.ordering)."""
     morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
     print("\n## size_scan: the best trees under both readings of the ordering (trees/<run_id>.csv)")
     print("N | reading | orders | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | dex D LAD per order (trunk = 11)")

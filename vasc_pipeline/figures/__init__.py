@@ -1,7 +1,7 @@
 """Figures of a reduced sweep (matplotlib, Agg backend, PNG into ``<output_dir>/figures/``).
 
 :func:`make_figures` draws everything from the summary DataTree of
-:mod:`vasc_pipeline.summary` (and, for the tree pictures, the best runs' stores)::
+:mod:`vasc_pipeline.reduce.summary` (and, for the tree pictures, the best runs' stores)::
 
     import xarray as xr
     from vasc_pipeline.figures import make_figures
@@ -35,6 +35,7 @@ from pathlib import Path
 
 import xarray as xr
 
+from ..store.layout import FIGURES_DIR
 from .costs import plot_convergence, plot_convergence_studies, plot_cost_traces
 from .orders import plot_asymmetry, plot_mb_effect, plot_morphometry
 from .sizes import plot_agreement, plot_size_scan
@@ -56,8 +57,6 @@ __all__ = [
     "REFERENCE_M_B",
 ]
 
-FIGURES_DIR = "figures"
-
 
 def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
     """Draw every figure that the sweep supports into ``<output_dir>/figures/``; returns the paths.
@@ -65,11 +64,11 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
     Parameters
     ----------
     summary : xarray.DataTree
-        From :func:`vasc_pipeline.summary.build_summary` or ``xarray.open_datatree(summary.zarr)``.
+        From :func:`vasc_pipeline.reduce.summary.build_summary` or ``xarray.open_datatree(summary.zarr)``.
     output_dir : path
         The sweep's output directory (the tree pictures read ``runs/<run_id>.zarr``).
     """
-    from ..store import run_path
+    from ..store.layout import run_path
 
     out = Path(output_dir) / FIGURES_DIR
     paths = []

@@ -15,12 +15,14 @@ from pathlib import Path
 
 import xarray as xr
 
+from ..store.layout import SUMMARY_NAME
+
 
 def _labelled_dir(text: str) -> tuple[str, Path]:
     label, sep, directory = text.partition("=")
     if not sep or not label or not directory:
         raise argparse.ArgumentTypeError(f"expected LABEL=OUTPUT_DIR, got {text!r}")
-    summary = Path(directory) / "summary.zarr"
+    summary = Path(directory) / SUMMARY_NAME
     if not summary.is_dir():
         raise argparse.ArgumentTypeError(
             f"{summary} does not exist: reduce the sweep first (python -m vasc_pipeline +stage=reduce "

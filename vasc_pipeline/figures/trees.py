@@ -29,8 +29,8 @@ _MASK_AXIS = {("x", "y"): 0, ("x", "z"): 1, ("y", "z"): 2}  # mask axes are (z, 
 
 def load_tree(store_path) -> dict:
     """What a tree picture needs from a run store: tree arrays (mm), tissue mask and geometry, inlet names."""
-    from ..morphometry import inlet_of
-    from ..store import RunStore
+    from ..reduce.morphometry import inlet_of
+    from ..store.run_store import RunStore
 
     store = RunStore.open(store_path, mode="r")
     tree = store.read_tree()
@@ -148,10 +148,10 @@ def plot_consistency(summary, output_dir, path, max_seeds: int = 4) -> Path | No
     """The paper's consistency figure: the trees of several seeds (columns) at every step count (rows).
 
     Each row is titled with the cell's ``trunk_spread`` (mean distance between the seeds' main
-    trunks, :mod:`vasc_pipeline.similarity`), the number that says how alike the trees are.
+    trunks, :mod:`vasc_pipeline.reduce.similarity`), the number that says how alike the trees are.
     Drawn for a sweep with a steps axis and two or more seeds; the x-y projection only.
     """
-    from ..store import run_path
+    from ..store.layout import run_path
 
     costs = summary["costs"].to_dataset()
     dims = cell_dims(summary)

@@ -1,0 +1,22 @@
+"""Shared test configuration: the ``unit`` / ``integration`` split of the suite.
+
+Markers (registered in pyproject.toml):
+
+- ``integration``: the pipeline end to end (subprocesses, Dask clusters, sweeps into run
+  stores, benchmark scripts). Whole modules set it with ``pytestmark``; single tests elsewhere
+  with ``@pytest.mark.integration``.
+- ``unit``: every other test (one function, kernel or store in this process), set here.
+- ``slow``: longer than a minute, left out of the default run.
+
+``python -m pytest -m unit`` runs the unit tests alone; helper functions live in ``helpers.py``.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if item.get_closest_marker("integration") is None:
+            item.add_marker(pytest.mark.unit)

@@ -1,0 +1,182 @@
+"""The package's layout: stage subpackages, short modules, no import circle, old paths still import."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import warnings
+from pathlib import Path
+
+import pytest
+
+import vasc_pipeline
+
+PACKAGE = Path(vasc_pipeline.__file__).parent
+MAX_LINES = 700
+MAX_TOP_LEVEL = 12
+
+
+def modules() -> dict[str, Path]:
+    """Every module of the package by dotted name (a package by its ``__init__``)."""
+    out = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path
+    return out
+
+
+def imported_modules(name: str, path: Path, known: set[str]) -> set[str]:
+    """The package's modules that ``name`` imports anywhere in its file (lazy imports too)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            submodules = {f"{target}.{a.name}" for a in node.names} & known
+            found.update(submodules or {target})
+    # a package's own __init__ runs before its submodules: an import of it from inside is no edge
+    return {m for m in found if m in known and m != name and not name.startswith(m + ".")}
+
+
+def test_no_module_is_longer_than_700_lines():
+    long = {n: len(p.read_text().splitlines()) for n, p in modules().items()}
+    assert {n: k for n, k in long.items() if k > MAX_LINES} == {}
+
+
+def test_the_top_level_shows_the_stages():
+    entries = [p.name for p in PACKAGE.iterdir() if p.name != "__pycache__"]
+    assert len(entries) <= MAX_TOP_LEVEL, sorted(entries)
+    for stage in ("config", "model", "kernel", "engine", "pipeline", "store", "reduce", "figures"):
+        assert (PACKAGE / stage / "__init__.py").is_file(), stage
+
+
+def test_no_import_circle():
+    mods = modules()
+    graph = {name: imported_modules(name, path, set(mods)) for name, path in mods.items()}
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+
+    def visit(node, path):
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                raise AssertionError("import circle: " + " -> ".join(path[path.index(nxt) :] + [nxt]))
+            if nxt not in state:
+                visit(nxt, path + [nxt])
+        state[node] = 2
+
+    for name in sorted(graph):
+        if name not in state:
+            visit(name, [name])
+
+
+def test_every_kernel_module_declares_its_names():
+    for path in (PACKAGE / "kernel").glob("*.py"):
+        if path.name != "__init__.py":
+            tree = ast.parse(path.read_text())
+            assert any(
+                isinstance(n, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in n.targets)
+                for n in tree.body
+            ), path.name
+
+
+@pytest.mark.parametrize("name", sorted(vasc_pipeline._SHORT_NAMES))
+def test_short_names_are_their_stage_modules_without_warning(name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        old = importlib.import_module(f"vasc_pipeline.{name}")
+    assert old is importlib.import_module(f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}")
+    assert old.__spec__.name == old.__name__ == f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}"
+
+
+@pytest.mark.parametrize("name", sorted(vasc_pipeline._DEPRECATED))
+def test_former_module_paths_are_deprecated_aliases(name):
+    import sys
+
+    sys.modules.pop(f"vasc_pipeline.{name}", None)
+    with pytest.warns(DeprecationWarning, match=f"vasc_pipeline.{name} moved to"):
+        old = importlib.import_module(f"vasc_pipeline.{name}")
+    assert old is importlib.import_module(f"vasc_pipeline.{vasc_pipeline._DEPRECATED[name]}")
+
+
+def test_submodules_of_an_alias_are_the_same_modules():
+    from vasc_pipeline.tissue.grid import Tissue
+
+    from vasc_pipeline.model.tissue import grid
+
+    assert Tissue is grid.Tissue
+
+
+def test_the_readme_api_imports():
+    from vasc_pipeline import (  # noqa: F401
+        cco,
+        config,
+        costs,
+        engine,
+        export,
+        job,
+        kernel,
+        morphometry,
+        physics,
+        reference,
+        store,
+        summary,
+        sweep,
+        tissue,
+        tree,
+    )
+
+    for fn in (
+        engine.run,
+        engine.build_problem,
+        engine.initial_state,
+        engine.state_from_tree,
+        engine.run_block,
+        engine.anneal_blocks,
+        engine.finish,
+        engine.state_arrays,
+        engine.restore_state,
+        config.compose,
+        morphometry.morphometry,
+        morphometry.compare_with_kassab,
+        reference.kassab_dataset,
+        export.export_run,
+    ):
+        assert callable(fn)
+
+
+def top_level_definitions(path: Path) -> set[str]:
+    """The public names a module defines itself (functions, classes, assignments)."""
+    names = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign):
+            names.update(x.id for t in node.targets for x in ast.walk(t) if isinstance(x, ast.Name))
+    return {n for n in names if not n.startswith("_")}
+
+
+@pytest.mark.parametrize(
+    "package, modules",
+    [
+        ("config", ["schema"]),
+        ("engine", ["problem", "run"]),
+        ("store", ["run_store"]),
+        ("reduce", ["stage"]),
+        ("kernel", ["state", "schedule", "exclusion", "supply", "pressure", "cells", "moves", "loop"]),
+    ],
+)
+def test_a_former_module_s_names_are_on_its_package(package, modules):
+    """config.py, engine.py, store.py, reduce.py and kernel.py became packages: every public name
+    those modules defined is still an attribute of the package."""
+    pkg = importlib.import_module(f"vasc_pipeline.{package}")
+    for module in modules:
+        missing = top_level_definitions(PACKAGE / package / f"{module}.py") - set(dir(pkg))
+        assert not missing, (module, sorted(missing))

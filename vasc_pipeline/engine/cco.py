@@ -1,0 +1,419 @@
+"""Constrained constructive optimisation (CCO): the constructive baseline on our tissue and cost.
+
+Schreiner & Buxbaum (1993) and Karch et al. (1999) grow a tree one terminal at a time:
+each new terminal is joined to the best of the nearest existing segments by a new
+bifurcation placed at the optimum of the local connection, and nothing already built is
+changed again except the flows and radii upstream. Here the substrate and the cost are the
+anneal's own (:func:`vasc_pipeline.engine.build_problem`): the same tissue, Murray radii
+r = r_t n^(1/gamma) with the *final* N (so a partial tree's cost is exactly the final
+tree's cost of its segments), equal terminal flows, and the vascular cost
+
+    C_v + C_w = sum_i w(n_i) L_i,   w(n) = volume[n] + power[n]   (physics.cost_tables).
+
+Adding a terminal t below segment j (node j, parent p, n_j terminals below) replaces the
+segment p-j by p-b, b-j and b-t (weights w(n_j + 1), w(n_j), w(1)) and raises n by one on
+every segment from p up to the inlet, so
+
+    dC = w(n_j+1)|b-p| + w(n_j)|b-j| + w(1)|b-t| - w(n_j) L_j
+         + sum over the ancestors a of j of (w(n_a + 1) - w(n_a)) L_a,
+
+with b the weighted Fermat-Weber point of (p, j, t) (:func:`vasc_pipeline.engine.fermat.fermat_point`:
+the vertex optimality test, then Weiszfeld iterations; exact up to 1e-12 of the triangle's
+size).
+``method.candidates`` segments nearest the new terminal (point-segment distance) are
+evaluated and the cheapest is taken; which inlet's tree a terminal joins follows from the
+cost, since the candidates span every tree.
+
+Terminal sites: given (``terminals.path``, in file order, or in a seeded random order with
+``method.order=random``), or drawn uniformly in the tissue (the draw of
+:func:`vasc_pipeline.model.tree.random_terminal_sites`, one site at a time) subject to the
+distance criterion of Schreiner's CCO: a site closer than d_crit to any existing segment is
+rejected, d_crit = f (V / k)^(1/3) (in 2-D (A / k)^(1/2)) with k the terminals already in
+the tree; f starts at 1 and is multiplied by ``method.shrink`` after every
+``method.max_tries`` consecutive rejections (and stays lowered: the criterion calibrates
+itself once and keeps shrinking with the tree). The first K terminals (K inlets) are
+joined straight to the inlets, matched to them by the cheapest assignment.
+
+Supply, exclusion and pressure are not seen by the growth; :func:`grow` evaluates them on
+the final tree with :func:`vasc_pipeline.model.costs.full_costs`, so the stored costs compare
+with the anneal's. Randomness comes from the run's xoshiro state (``rng``): a run is a pure
+function of (config, seed).
+
+Usable without Hydra or Dask::
+
+    from vasc_pipeline import cco, config, costs, engine
+    problem = engine.build_problem(config.compose(["method=cco", "tissue=plane2d"]))
+    result = cco.grow(problem, seed=0)
+    result.tree, costs.vascular_cost(result.costs)
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._jit import jit, jit_inline
+from ..kernel.state import _add
+from ..model.costs import full_costs, total_cost
+from ..model.physics import cost_tables
+from ..model.rng import next_below, next_double, seed_state
+from ..model.tree import Tree, random_terminal_sites
+from ..store.run_store import TRACE_FIELDS
+from .fermat import _norm3, fermat_point
+
+# fermat_point lives in vasc_pipeline.engine.fermat; it stays importable from here, where it is used.
+__all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", "TRACE_NAMES"]
+
+# Trace fields of a CCO run (the anneal's names; "step" counts terminals in the tree,
+# "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance criterion
+# accepted for that terminal).
+TRACE_NAMES = tuple(f[0] for f in TRACE_FIELDS)
+
+
+@dataclass
+class CCOResult:
+    """The outcome of :func:`grow`.
+
+    Attributes
+    ----------
+    tree : Tree
+        Layout of :class:`~vasc_pipeline.model.tree.Tree`; terminal K + i is the i-th added.
+    costs : dict
+        The growth's running sums of C_v and C_w [W]; supply, exclusion and pressure
+        evaluated on the final tree; ``total`` the annealed, scaled C.
+    costs_recomputed : dict
+        :func:`~vasc_pipeline.model.costs.full_costs` of the final tree (every term).
+    trace : dict of float64 / int64 arrays
+        One record per terminal added (``TRACE_NAMES``): C_v, C_w of the partial tree.
+    tries : int
+        Sites drawn (random sites only; equals N with given sites).
+    distance_factor : float
+        The final factor f of the distance criterion (1 with given sites).
+    wall_seconds : float
+    """
+
+    tree: Tree
+    costs: dict
+    costs_recomputed: dict
+    trace: dict = field(repr=False)
+    tries: int = 0
+    distance_factor: float = 1.0
+    wall_seconds: float = 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# The growth kernel
+
+
+@jit_inline
+def _point_segment_distance(x, a, b):
+    """Distance from point x to the segment a-b (all float64 (3,))."""
+    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    d0, d1, d2 = x[0] - a[0], x[1] - a[1], x[2] - a[2]
+    ee = e0 * e0 + e1 * e1 + e2 * e2
+    t = 0.0
+    if ee > 0.0:
+        t = min(max((d0 * e0 + d1 * e1 + d2 * e2) / ee, 0.0), 1.0)
+    return _norm3(d0 - t * e0, d1 - t * e1, d2 - t * e2)
+
+
+@jit
+def connection_cost(parent, n_down, seg_length, position, w_vol, w_pow, j, site, out):
+    """(dC_v, dC_w) of joining a terminal at ``site`` below segment ``j``; the new bifurcation into ``out``.
+
+    ``w_vol``, ``w_pow``: cost tables by n [W m^-1]; ``seg_length`` [m] per node.
+    """
+    p = parent[j]
+    n = n_down[j]
+    w_up = w_vol[n + 1] + w_pow[n + 1]
+    w_dn = w_vol[n] + w_pow[n]
+    w_t = w_vol[1] + w_pow[1]
+    fermat_point(position[p], position[j], site, w_up, w_dn, w_t, out)
+    l_up = _norm3(out[0] - position[p, 0], out[1] - position[p, 1], out[2] - position[p, 2])
+    l_dn = _norm3(out[0] - position[j, 0], out[1] - position[j, 1], out[2] - position[j, 2])
+    l_t = _norm3(out[0] - site[0], out[1] - site[1], out[2] - site[2])
+    d_vol = w_vol[n + 1] * l_up + w_vol[n] * l_dn + w_vol[1] * l_t - w_vol[n] * seg_length[j]
+    d_pow = w_pow[n + 1] * l_up + w_pow[n] * l_dn + w_pow[1] * l_t - w_pow[n] * seg_length[j]
+    a = p
+    while parent[a] >= 0:  # every segment above j carries one more terminal
+        m = n_down[a]
+        d_vol += (w_vol[m + 1] - w_vol[m]) * seg_length[a]
+        d_pow += (w_pow[m + 1] - w_pow[m]) * seg_length[a]
+        a = parent[a]
+    return d_vol, d_pow
+
+
+@jit
+def _draw_site(rng, voxels, shape, origin, voxel_size, planar, out):
+    """One uniform tissue point: the draw of tree.random_terminal_sites for a single site."""
+    u0 = next_double(rng)
+    u1 = next_double(rng)
+    u2 = next_double(rng)
+    u3 = next_double(rng)
+    k = np.int64(u0 * voxels.size)
+    pick = voxels[min(k, voxels.size - 1)]
+    nyx = shape[1] * shape[2]
+    z = pick // nyx
+    y = (pick - z * nyx) // shape[2]
+    x = pick - z * nyx - y * shape[2]
+    out[0] = origin[0] + voxel_size * x + (u1 - 0.5) * voxel_size
+    out[1] = origin[1] + voxel_size * y + (u2 - 0.5) * voxel_size
+    out[2] = origin[2] + voxel_size * z + ((u3 - 0.5) * voxel_size if not planar else 0.0)
+
+
+@jit
+def _grow(
+    parent,
+    children,
+    position,
+    n_down,
+    seg_length,
+    costs,
+    compensation,
+    rng,
+    w_vol,
+    w_pow,
+    sites,
+    random_sites,
+    voxels,
+    shape,
+    origin,
+    voxel_size,
+    planar,
+    measure,
+    ndim,
+    n_candidates,
+    max_tries,
+    shrink,
+    factor,
+    trace,
+    first,
+):
+    """Add terminals ``first`` .. N - 1 (in place). Returns (sites drawn, final distance factor).
+
+    Node layout: inlets [0, K), terminal i at K + i, the bifurcation made by terminal i at
+    N + i. ``trace`` float64 (N, 3): C_v, C_w after each terminal, and sites drawn for it.
+    """
+    k_in = first  # the first K terminals (one per inlet) are in place
+    n_total = parent.size // 2
+    site = np.empty(3)
+    bif = np.empty(3)
+    best_bif = np.empty(3)
+    cand = np.empty(n_candidates, dtype=np.int64)
+    cand_d = np.empty(n_candidates)
+    drawn = 0
+    for i in range(first, n_total):
+        t = k_in + i
+        n_segments = 2 * i - k_in  # non-inlet nodes: i terminals and i - K bifurcations
+        tries = 0
+        while True:
+            if random_sites:
+                _draw_site(rng, voxels, shape, origin, voxel_size, planar, site)
+            else:
+                for c in range(3):
+                    site[c] = sites[i, c]
+            tries += 1
+            d_crit = factor * (measure / i) ** (1.0 / ndim) if random_sites else -1.0
+            n_c = 0
+            ok = True
+            # Segments are the non-inlet nodes built so far: terminals K..K+i-1, bifurcations N+K..N+i-1.
+            for s in range(n_segments):
+                node = k_in + s if s < i else n_total + k_in + (s - i)
+                d = _point_segment_distance(site, position[parent[node]], position[node])
+                if d < d_crit:
+                    ok = False
+                    break
+                if n_c < n_candidates or d < cand_d[n_c - 1]:  # keep the nearest, sorted
+                    pos = n_c if n_c < n_candidates else n_candidates - 1
+                    while pos > 0 and cand_d[pos - 1] > d:
+                        cand_d[pos] = cand_d[pos - 1]
+                        cand[pos] = cand[pos - 1]
+                        pos -= 1
+                    cand_d[pos] = d
+                    cand[pos] = node
+                    if n_c < n_candidates:
+                        n_c += 1
+            if ok:
+                break
+            if tries % max_tries == 0:
+                factor *= shrink
+        drawn += tries
+        best = -1
+        best_vol = 0.0
+        best_pow = 0.0
+        for c in range(n_c):
+            d_vol, d_pow = connection_cost(parent, n_down, seg_length, position, w_vol, w_pow, cand[c], site, bif)
+            if best < 0 or d_vol + d_pow < best_vol + best_pow:
+                best, best_vol, best_pow = cand[c], d_vol, d_pow
+                best_bif[:] = bif
+        # Join t below ``best`` through the new bifurcation b.
+        b = n_total + i
+        p = parent[best]
+        if children[p, 0] == best:
+            children[p, 0] = b
+        else:
+            children[p, 1] = b
+        parent[b] = p
+        parent[best] = b
+        parent[t] = b
+        children[b, 0] = best
+        children[b, 1] = t
+        position[b] = best_bif
+        position[t] = site
+        n_down[t] = 1
+        n_down[b] = n_down[best] + 1
+        a = p
+        while a >= 0:
+            n_down[a] += 1
+            a = parent[a]
+        seg_length[b] = _norm3(best_bif[0] - position[p, 0], best_bif[1] - position[p, 1], best_bif[2] - position[p, 2])
+        seg_length[best] = _norm3(
+            best_bif[0] - position[best, 0], best_bif[1] - position[best, 1], best_bif[2] - position[best, 2]
+        )
+        seg_length[t] = _norm3(best_bif[0] - site[0], best_bif[1] - site[1], best_bif[2] - site[2])
+        _add(costs, compensation, 0, best_vol)
+        _add(costs, compensation, 1, best_pow)
+        trace[i, 0] = costs[0] + compensation[0]
+        trace[i, 1] = costs[1] + compensation[1]
+        trace[i, 2] = tries
+    return drawn, factor
+
+
+# --------------------------------------------------------------------------------------------
+# Public wrappers
+
+
+def _site_order(problem, rng: np.ndarray) -> np.ndarray | None:
+    """Given sites in the order they are added (file order, or a seeded shuffle)."""
+    if problem.sites is None:
+        return None
+    sites = np.ascontiguousarray(problem.sites, dtype=np.float64)
+    if problem.config.method.order == "random":
+        order = np.arange(len(sites))
+        for i in range(order.size - 1, 0, -1):  # Fisher-Yates with the run's generator
+            j = next_below(rng, i + 1)
+            order[i], order[j] = order[j], order[i]
+        sites = sites[order]
+    return sites
+
+
+def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
+    """The CCO tree of ``problem``, drawing from ``rng`` (uint64 (4,), advanced in place).
+
+    Returns (tree, trace (N, 3): C_v, C_w after each terminal and sites drawn for it,
+    sites drawn in all, final distance factor). The anneal's ``anneal.init=cco`` uses this.
+    """
+    physics, tissue = problem.physics, problem.tissue
+    method = problem.config.method
+    n, k = physics.n_terminals, physics.n_inlets
+    tables = cost_tables(physics)
+    w_vol = np.ascontiguousarray(tables.volume)
+    w_pow = np.ascontiguousarray(tables.power)
+    m = 2 * n
+    parent = np.full(m, -1, dtype=np.int64)
+    children = np.full((m, 2), -1, dtype=np.int64)
+    position = np.zeros((m, 3))
+    n_down = np.zeros(m, dtype=np.int64)
+    seg_length = np.zeros(m)
+    position[:k] = tissue.inlets
+    sites = _site_order(problem, rng)
+    first = random_terminal_sites(tissue, k, rng) if sites is None else sites[:k]
+    # The first K terminals go straight to the inlets, by the cheapest assignment.
+    best = min(
+        itertools.permutations(range(k)),
+        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - tissue.inlets[j]) for j in range(k)),
+    )
+    costs, compensation = np.zeros(2), np.zeros(2)
+    trace = np.zeros((n, 3))
+    for j in range(k):
+        t = k + j
+        position[t] = first[best[j]]
+        parent[t] = j
+        children[j, 0] = t
+        n_down[t] = n_down[j] = 1
+        seg_length[t] = np.linalg.norm(position[t] - position[j])
+        _add(costs, compensation, 0, float(w_vol[1]) * seg_length[t])
+        _add(costs, compensation, 1, float(w_pow[1]) * seg_length[t])
+        trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
+    voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
+    # one argument per flat array, as _grow's signature lists them (numba takes no struct)
+    drawn, factor = _grow(
+        parent,
+        children,
+        position,
+        n_down,
+        seg_length,
+        costs,
+        compensation,
+        rng,
+        w_vol,
+        w_pow,
+        sites if sites is not None else np.zeros((0, 3)),
+        sites is None,
+        voxels,
+        np.array(tissue.shape, dtype=np.int64),
+        np.ascontiguousarray(tissue.origin, dtype=np.float64),
+        float(tissue.voxel_size),
+        tissue.ndim == 2,
+        float(tissue.measure),
+        int(tissue.ndim),
+        int(method.candidates),
+        int(method.max_tries),
+        float(method.shrink),
+        1.0,
+        trace,
+        k,
+    )
+    tree = Tree(parent, children, position, n_down, k)
+    return tree, trace, int(drawn) + k, float(factor)
+
+
+def grow(problem, seed: int | None = None, rng: np.ndarray | None = None) -> CCOResult:
+    """Grow the CCO tree of (problem, seed) and evaluate every cost term on it.
+
+    Parameters
+    ----------
+    problem : vasc_pipeline.engine.Problem
+        From :func:`~vasc_pipeline.engine.build_problem` (any tissue, method settings in
+        ``problem.config.method``).
+    seed : int, optional
+        Default ``problem.config.seed``; the generator is ``rng.seed_state(seed)``.
+    rng : uint64 (4,), optional
+        Draw from this generator state instead (advanced in place).
+    """
+    start = time.perf_counter()
+    if rng is None:
+        rng = seed_state(problem.config.seed if seed is None else int(seed))
+    tree, rows, drawn, factor = grow_tree(problem, rng)
+    recomputed = full_costs(tree, problem.tissue, problem.physics, problem.terms)
+    costs = dict(recomputed)
+    costs["volume"], costs["power"] = float(rows[-1, 0]), float(rows[-1, 1])  # the growth's running sums
+    costs["total"] = total_cost(costs, problem.physics)
+    k = problem.physics.n_inlets
+    steps = np.arange(1, tree.n_terminals + 1, dtype=np.int64)[k - 1 :]
+    body = rows[k - 1 :]
+    zeros = np.zeros(body.shape[0])
+    trace = {
+        "step": steps,
+        "temperature": np.full(body.shape[0], np.nan),
+        "volume": body[:, 0].copy(),
+        "power": body[:, 1].copy(),
+        "supply": zeros.copy(),
+        "exclusion": zeros.copy(),
+        "pressure": zeros.copy(),
+        "total": body[:, 0] + body[:, 1],
+        "acceptance": 1.0 / body[:, 2],
+    }
+    trace["acceptance"][0] = 1.0
+    return CCOResult(
+        tree=tree,
+        costs=costs,
+        costs_recomputed=recomputed,
+        trace=trace,
+        tries=drawn,
+        distance_factor=factor,
+        wall_seconds=time.perf_counter() - start,
+    )

@@ -1,0 +1,202 @@
+"""Grow one optimised tree: build the problem, initialise, anneal in blocks, report.
+
+Usable without Hydra or Dask::
+
+    from vasc_pipeline import config, engine
+    result = engine.run(config.compose(["tissue=plane2d", "anneal.steps=200000"]), seed=1)
+    result.costs["total"], result.costs_recomputed["total"]
+
+The anneal loop is Python (schedule blocks, trace, progress); each block is one call of the
+jitted kernel (:func:`vasc_pipeline.kernel.anneal_block`), so a caller can checkpoint
+between blocks with :func:`state_arrays` / :func:`restore_state`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from .. import kernel
+from ..kernel import packing
+from ..model.costs import COST_TERMS, full_costs, vascular_cost
+from ..model.tree import Tree
+from ..store.run_store import TRACE_FIELDS
+from .polish import descend_swaps, polish
+from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
+
+__all__ = [
+    "RunResult",
+    "Trace",
+    "run_block",
+    "anneal_blocks",
+    "finish",
+    "run",
+]
+
+
+@dataclass
+class RunResult:
+    """The outcome of :func:`run`: the final tree and its costs (SI, W for costs)."""
+
+    tree: Tree
+    problem: Problem
+    seed: int
+    costs: dict[str, float]
+    costs_recomputed: dict[str, float]
+    steps: int
+    wall_seconds: float
+    trace: dict[str, np.ndarray] = field(repr=False)
+    counters: np.ndarray = field(repr=False)
+    anneal: dict[str, Any] = field(default_factory=dict)  # schedule as run, final step sizes, polish report
+    statistics: dict[str, float] = field(default_factory=dict)  # tree_statistics of the final tree
+
+    @property
+    def radius(self) -> np.ndarray:
+        """Radius [m] of the segment ending at every node (0 at inlets)."""
+        return node_radii(self.tree, self.problem.physics)
+
+
+def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
+    """Propose ``n_steps`` moves (in place): packing moves first while the packing phase
+    lasts (:mod:`vasc_pipeline.kernel.packing`), then the tree anneal's; before
+    ``problem.coarse_steps`` on the coarse exclusion map, and the block that reaches it
+    recomputes every segment's exclusion on the true one. The GIL is released."""
+    n = int(n_steps)
+    coarse = min(n, problem.coarse_steps - int(state.counters[kernel.COUNTER_STEP]))
+    if coarse > 0:
+        _run_model(problem.coarse_model, state, coarse)
+        n -= coarse
+        if state.counters[kernel.COUNTER_STEP] == problem.coarse_steps:
+            kernel.recompute_exclusion(problem.model, state)
+    if n > 0:
+        _run_model(problem.model, state, n)
+
+
+def _run_model(model: kernel.Model, state: kernel.State, n: int) -> None:
+    if state.counters[kernel.COUNTER_STEP] < model.pack_steps:
+        n -= packing.pack_block(model, state, n)
+    if n > 0:
+        kernel.anneal_block(model, state, n)
+
+
+class Trace:
+    """Cost trace records, one per block: step, temperature, cost terms, acceptance."""
+
+    names = tuple(f[0] for f in TRACE_FIELDS)
+
+    def __init__(self) -> None:
+        self.rows: list[tuple] = []
+
+    def record(self, problem: Problem, state: kernel.State, proposed: int, accepted: int) -> None:
+        step = int(state.counters[kernel.COUNTER_STEP])
+        costs = running_costs(problem, state)
+        temp = kernel.temperature(problem.model, state, max(step - 1, 0))
+        self.rows.append(
+            (step, temp, *(costs[c] for c in COST_TERMS), costs["total"], accepted / proposed if proposed else 0.0)
+        )
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        data = np.array(self.rows, dtype=np.float64).reshape(-1, len(self.names))
+        out = {name: data[:, i] for i, name in enumerate(self.names)}
+        out["step"] = out["step"].astype(np.int64)
+        return out
+
+
+def accepted_moves(state: kernel.State) -> int:
+    c = state.counters
+    return int(
+        c[kernel.COUNTER_TERMINAL_ACCEPTED] + c[kernel.COUNTER_BIFURCATION_ACCEPTED] + c[kernel.COUNTER_SWAP_ACCEPTED]
+    )
+
+
+def anneal_blocks(problem: Problem, state: kernel.State, trace: Trace, block: int) -> Iterator[int]:
+    """Anneal ``state`` to the end of the schedule in blocks, recording one trace row per block.
+
+    Blocks end on multiples of ``block`` (a resumed state starts on one), so a resumed run
+    has exactly the trace of an uninterrupted one. Yields the step count after every block
+    (the caller reports progress or checkpoints there).
+    """
+    total = problem.total_steps
+    while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
+        n = min(block - step % block, total - step)
+        before = accepted_moves(state)
+        run_block(problem, state, n)
+        trace.record(problem, state, n, accepted_moves(state) - before)
+        yield step + n
+
+
+def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
+    """After the last step: polish the geometry when ``anneal.polish``; report how the anneal ran.
+
+    Deterministic and draws no random number, so a resumed run finishes identically.
+    Returns the ``anneal`` report stored with a run: the schedule's temperatures [W], the
+    final translation half-widths [m] and, with polish, its before/after costs.
+    """
+    report: dict[str, Any] = {
+        "T_start": float(state.schedule[0]),
+        "T_end": float(state.schedule[1]),
+        "step_terminal": float(state.step_size[0]),
+        "step_bifurcation": float(state.step_size[1]),
+    }
+    a = problem.config.anneal
+    if a.polish:
+        rng_saved, counters_saved = state.rng.copy(), state.counters.copy()
+        result = polish(problem, state)
+        swaps = descend_swaps(problem, state) if problem.physics.n_terminals <= a.polish_swaps_max_terminals else 0
+        if swaps:
+            polish(problem, state)  # exclusion may leave the new optimum only partly taken
+        state.rng[:], state.counters[:] = rng_saved, counters_saved
+        after = running_costs(problem, state)
+        report["polish"] = {
+            "applied": result["applied"],
+            "moved": result["moved"],
+            "swaps": swaps,
+            "total_before": result["before"]["total"],
+            "total_after": after["total"],
+            "vascular_before": vascular_cost(result["before"]),
+            "vascular_after": vascular_cost(after),
+        }
+    return report
+
+
+def run(
+    config: Any,
+    seed: int | None = None,
+    *,
+    block_steps: int | None = None,
+    progress: Callable[[int, int, dict], None] | None = None,
+) -> RunResult:
+    """Grow one tree from (config, seed) and return it with running and recomputed costs.
+
+    ``seed`` defaults to ``config.seed``. ``block_steps`` (default ``anneal.trace_every``)
+    sets the trace resolution; it does not change the result. ``progress(step, total,
+    costs)`` is called after every block.
+    """
+    start = time.perf_counter()
+    problem = build_problem(config)
+    seed = problem.config.seed if seed is None else int(seed)
+    state = initial_state(problem, seed)
+    block = int(block_steps or problem.config.anneal.trace_every)
+    trace = Trace()
+    trace.record(problem, state, 0, 0)
+    for step in anneal_blocks(problem, state, trace, block):
+        if progress is not None:
+            progress(step, problem.total_steps, running_costs(problem, state))
+    report = finish(problem, state)
+    tree = tree_of(problem, state)
+    return RunResult(
+        tree=tree,
+        problem=problem,
+        seed=seed,
+        costs=running_costs(problem, state),
+        costs_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
+        steps=int(state.counters[kernel.COUNTER_STEP]),
+        wall_seconds=time.perf_counter() - start,
+        trace=trace.arrays(),
+        counters=state.counters.copy(),
+        anneal=report,
+        statistics=tree_statistics(problem, tree),
+    )

@@ -1,0 +1,69 @@
+"""Tissue domains as voxel grids (isotropic voxels): the registry of named tissues and its builder.
+
+:func:`build_tissue` returns a :class:`Tissue` for each named domain of :data:`TISSUES`:
+``sphere``, ``box``, ``plane2d`` and ``mask`` (a user's array) from
+:mod:`~vasc_pipeline.model.tissue.shapes`, and ``heart``, the paper's coronary substrate, from
+:mod:`~vasc_pipeline.model.tissue.heart`. The voxel grid itself (the :class:`Tissue` class, its
+distance transform, :func:`voxelize`, :func:`default_voxel_size`) is
+:mod:`~vasc_pipeline.model.tissue.grid`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from . import heart
+from .grid import (
+    VOXELS_PER_SUPPLY_RADIUS,
+    ExclusionGrid,
+    Tissue,
+    TissueError,
+    default_voxel_size,
+    resampled_exclusion_grid,
+    voxelize,
+)
+from .shapes import box, mask, plane2d, sphere
+
+__all__ = [
+    "Tissue",
+    "TissueError",
+    "ExclusionGrid",
+    "build_tissue",
+    "voxelize",
+    "default_voxel_size",
+    "VOXELS_PER_SUPPLY_RADIUS",
+    "TISSUES",
+]
+
+TISSUES: dict[str, Callable[..., Tissue]] = {
+    "heart": heart.heart_tissue,
+    "plane2d": plane2d,
+    "sphere": sphere,
+    "box": box,
+    "mask": mask,
+}
+# The tissues drawn from shapes: on another grid they are voxelised anew (the user's mask is resampled).
+SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box")
+
+
+def build_tissue(name: str, n_terminals: int, exclusion_voxel_size: float | None = None, **params) -> Tissue:
+    """Build the named tissue for ``n_terminals`` terminals (params: the tissue config).
+
+    ``exclusion_voxel_size`` [m] (``tissue.exclusion_voxel_size``) gives the exclusion term a
+    grid of its own (:attr:`Tissue.exclusion_grid`): a shaped tissue voxelised at that edge, over
+    a box that does not depend on N, or a mask's exclusion domain resampled onto it. None, or
+    the supply grid's own edge: the supply grid.
+    """
+    if name not in TISSUES:
+        raise TissueError(f"tissue.name: unknown tissue {name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    tissue = TISSUES[name](n_terminals, **params)
+    if exclusion_voxel_size is not None and exclusion_voxel_size != tissue.voxel_size:
+        try:
+            if name in SHAPED_TISSUES:
+                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size})
+                tissue.exclusion_grid = twin.exclusion_grid
+            else:
+                tissue.exclusion_grid = resampled_exclusion_grid(tissue, exclusion_voxel_size)
+        except TissueError as exc:
+            raise TissueError(f"tissue.exclusion_voxel_size={exclusion_voxel_size:g} m: {exc}") from exc
+    return tissue

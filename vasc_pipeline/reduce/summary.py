@@ -1,0 +1,477 @@
+"""The summary of a sweep: the xarray DataTree of ``summary.zarr``, built from the complete runs and written atomically.
+
+:func:`build_summary` assembles it from :func:`vasc_pipeline.reduce.runs.find_runs`' runs (the best
+seed of every cell, its morphometry and comparison with Kassab et al. 1993, the costs and
+traces of every seed); :func:`write_summary` writes it beside the old one and swaps it in.
+
+``<output_dir>/summary.zarr`` is an xarray DataTree (Zarr v3, consolidated). Cell dims are
+``n_terminals`` and ``m_b`` always, ``steps`` when the sweep had a steps axis and
+``tissue`` when the directory holds more than one tissue, ``method`` when it holds both
+anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
+
+- ``/morphometry``  (cell..., scheme, order): element and segment diameter/length mean, SD,
+  SE and counts of the best tree; per cell ``best_seed``, ``best_run_id``, ``best_cost``,
+  ``n_seeds``, ``trunk_spread`` (how alike the seeds' trees are: mean distance between
+  their main trunks, m) and ``trunk_tortuosity`` (the best tree's main trunks, arc length
+  over chord).
+- ``/asymmetry``    (cell..., scheme, order): D_s/D_p and D_l/D_p by parent order, and
+  ``symmetric_ratio`` = 2^(-1/gamma) per cell.
+- ``/costs``        (cell..., seed): final costs (annealed total and every unscaled term),
+  steps, wall time and run id of every complete run; ``is_best``; ``cavity_share`` (the
+  heart: share of the large vessels' length inside the ventricular cavities).
+- ``/traces``       (cell..., seed, record): the cost traces of all complete runs,
+  NaN-padded to the longest.
+- ``/kassab``       (artery, level, order): :func:`vasc_pipeline.reduce.reference.kassab_dataset`.
+- ``/comparison``   (cell..., artery, order) and (cell..., artery): model against Kassab,
+  element level, diameter-defined orders; mean absolute log10 ratios.
+
+Orders of cells with different N are aligned on the shifted order (highest = 11): a
+smaller tree simply has NaN / 0 at the low orders it does not reach.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import shutil
+import socket
+import warnings
+from pathlib import Path
+
+import numpy as np
+import psutil
+import xarray as xr
+
+from ..store.run_store import TRACE_FIELDS, RunStore, file_lock
+from . import morphometry as _m
+from .reference import ARTERIES, kassab_dataset
+from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
+from .similarity import main_trunks, tortuosity, trunk_spread
+
+__all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
+
+COMPARISON_SCHEME, COMPARISON_LEVEL = "diameter_defined", "element"
+_TRACE_META = {name: (units, long_name) for name, _, units, long_name in TRACE_FIELDS}
+_COST_META = {
+    "total": _TRACE_META["total"],
+    "volume": _TRACE_META["volume"],
+    "power": _TRACE_META["power"],
+    "supply": _TRACE_META["supply"],
+    "exclusion": _TRACE_META["exclusion"],
+    "pressure": _TRACE_META["pressure"],
+}
+_CELL_META = {
+    "tissue": {"long_name": "tissue"},
+    "method": {"long_name": "how the tree was grown (anneal, cco)"},
+    "n_terminals": {"long_name": "number of terminal nodes N", "units": "1"},
+    "m_b": {"long_name": "metabolic cost of blood m_b", "units": "W m-3"},
+    "steps": {"long_name": "proposed moves per run", "units": "1"},
+    "seed": {"long_name": "random seed", "units": "1"},
+}
+
+
+def _cell_dims(runs: list[RunInfo]) -> list[str]:
+    dims = ["n_terminals", "m_b"]
+    if any(r.steps is not None for r in runs):
+        dims.append("steps")
+    if len({r.tissue for r in runs}) > 1:
+        dims.insert(0, "tissue")
+    if len({r.method for r in runs}) > 1:  # anneal and CCO runs side by side
+        dims.insert(0, "method")
+    return dims
+
+
+def _with_steps(runs: list[RunInfo], dims: list[str]) -> list[RunInfo]:
+    """Runs without a steps coordinate get their own step count when others have one."""
+    if "steps" not in dims:
+        return runs
+    for r in runs:
+        if r.steps is None:
+            r.steps = r.steps_done
+    return runs
+
+
+def _fill_for(dtype: np.dtype):
+    if np.issubdtype(dtype, np.floating):
+        return np.nan
+    if np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.bool_):
+        return 0
+    return ""
+
+
+def _stack(parts: dict[tuple, xr.Dataset], dims: list[str], coords: dict[str, list]) -> xr.Dataset:
+    """Place per-cell datasets (identical inner shapes) on the grid ``dims``; absent cells get fillers.
+
+    Fillers: NaN (floats), 0 (integers, counts), "" (strings).
+    """
+    first = next(iter(parts.values()))
+    index = {d: {v: i for i, v in enumerate(coords[d])} for d in dims}
+    grid_shape = [len(coords[d]) for d in dims]
+    out = {}
+    for name, var in first.data_vars.items():
+        dtype = var.dtype if var.dtype.kind in "fiub" else object
+        arr = np.full(grid_shape + list(var.shape), _fill_for(np.dtype(dtype)), dtype=dtype)
+        for key, ds in parts.items():
+            value = ds[name].values
+            # a 0-d object array would be stored as an element itself: take its item
+            arr[tuple(index[d][k] for d, k in zip(dims, key))] = value[()] if value.ndim == 0 else value
+        out[name] = (dims + list(var.dims), arr, dict(var.attrs))
+    inner = {k: v for k, v in first.coords.items() if set(v.dims) <= set(first.dims)}
+    ds = xr.Dataset(out, coords={**{d: (d, _coord_values(coords[d]), _CELL_META[d]) for d in dims}, **inner})
+    return ds
+
+
+def _coord_values(values: list) -> np.ndarray:
+    if values and isinstance(values[0], str):
+        return np.array(values, dtype=object)
+    return np.asarray(values)
+
+
+def _cell_var(best: dict[tuple, RunInfo], getter, dtype, units: str | None, long_name: str):
+    attrs = {"long_name": long_name, **({"units": units} if units else {})}
+    return {k: xr.DataArray(np.asarray(getter(r), dtype=dtype), attrs=attrs) for k, r in best.items()}
+
+
+def _morphometry_of(run: RunInfo) -> xr.Dataset:
+    tree = RunStore.open(run.path, mode="r").read_tree()
+    return _m.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])
+
+
+def _main_trunks_of(run: RunInfo) -> list[np.ndarray]:
+    tree = RunStore.open(run.path, mode="r").read_tree()
+    return main_trunks(tree["parent"], tree["position"], tree["kind"])
+
+
+def _trunk_spread_of(cell_trunks: list[list[np.ndarray]]) -> float:
+    """Mean over pairs of seeds of the trunk distance (:mod:`vasc_pipeline.reduce.similarity`); NaN for one seed."""
+    if len(cell_trunks) < 2:
+        return float("nan")
+    return float(np.mean(trunk_spread(cell_trunks)))
+
+
+_ASYMMETRY_VARS = (
+    "diameter_ratio_small_mean",
+    "diameter_ratio_small_sd",
+    "diameter_ratio_small_se",
+    "diameter_ratio_large_mean",
+    "diameter_ratio_large_sd",
+    "diameter_ratio_large_se",
+    "bifurcation_count",
+)
+
+
+def _comparison_part(morph: xr.Dataset, reference: xr.Dataset, orders: np.ndarray) -> tuple[xr.Dataset, dict]:
+    """Model vs Kassab for every artery: (artery, order) table and per-artery summary values."""
+    per_order, summary = [], {}
+    for artery in ARTERIES:
+        table = _m.compare_with_kassab(
+            morph, artery, scheme=COMPARISON_SCHEME, level=COMPARISON_LEVEL, reference=reference
+        )
+        per_order.append(xr.Dataset.from_dataframe(table).reindex(order=orders))
+        summary[artery] = dict(table.attrs)
+    ds = xr.concat(per_order, dim=xr.DataArray(list(ARTERIES), dims="artery", name="artery"))
+    for name in ("model_count", "kassab_count"):
+        ds[name] = ds[name].fillna(0).astype(np.int64)
+    meta = {
+        "model_diameter": ("m", f"model mean {COMPARISON_LEVEL} diameter"),
+        "kassab_diameter": ("m", f"Kassab 1993 mean {COMPARISON_LEVEL} diameter"),
+        "diameter_log10_ratio": ("1", "log10 of model over Kassab mean diameter"),
+        "model_length": ("m", f"model mean {COMPARISON_LEVEL} length"),
+        "kassab_length": ("m", f"Kassab 1993 mean {COMPARISON_LEVEL} length"),
+        "length_log10_ratio": ("1", "log10 of model over Kassab mean length"),
+        "model_count": ("1", f"model number of {COMPARISON_LEVEL}s"),
+        "kassab_count": ("1", f"Kassab 1993 number of {COMPARISON_LEVEL}s measured"),
+    }
+    for name, (units, long_name) in meta.items():
+        ds[name].attrs = {"units": units, "long_name": long_name}
+    for name, long_name in (
+        ("mean_abs_log10_ratio_diameter", "mean over orders of |log10 model/Kassab diameter|"),
+        ("mean_abs_log10_ratio_length", "mean over orders of |log10 model/Kassab length|"),
+        ("mean_abs_log10_ratio", "mean of the diameter and length mean |log10 ratio|"),
+    ):
+        ds[name] = ("artery", [summary[a][name] for a in ARTERIES], {"units": "1", "long_name": long_name})
+    ds["n_orders_compared"] = (
+        "artery",
+        np.array([summary[a]["n_orders_compared"] for a in ARTERIES], dtype=np.int64),
+        {"units": "1", "long_name": "orders present in both model and Kassab"},
+    )
+    return ds.drop_vars("artery"), summary
+
+
+def build_summary(
+    runs: list[RunInfo], *, output_dir: str | os.PathLike | None = None
+) -> tuple[xr.DataTree, dict[tuple, RunInfo], list[str]]:
+    """The summary DataTree of complete ``runs`` (see the module docstring for the schema).
+
+    Parameters
+    ----------
+    runs : list of RunInfo
+        From :func:`find_runs`; at least one.
+    output_dir : path, optional
+        Recorded in the root attributes.
+
+    Returns
+    -------
+    (xarray.DataTree, dict of cell key -> best RunInfo, list of cell dims)
+    """
+    if not runs:
+        raise ReductionError("no complete run to reduce")
+    dims = _cell_dims(runs)
+    runs = _with_steps(runs, dims)
+    best = best_runs(runs, dims)
+    cell_coords = {d: sorted({getattr(r, d) for r in runs}) for d in dims}
+    morph = {key: _morphometry_of(r) for key, r in best.items()}
+    # One order axis for all cells: the union of the shifted orders (highest 11) and Kassab's 1..11.
+    reference = kassab_dataset()
+    lo = min([int(ds.order.min()) for ds in morph.values()] + [int(reference.order.min())])
+    orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
+
+    morph_parts, asym_parts, comp_parts = {}, {}, {}
+    for key, ds in morph.items():
+        r = best[key]
+        ds = ds.drop_dims("node").reindex(order=orders)
+        for name, var in ds.data_vars.items():  # reindex turns absent counts into NaN: back to 0
+            if name.endswith("_count"):
+                ds[name] = var.fillna(0).astype(np.int64)
+        ds["dds_iterations"] = (
+            (),
+            int(ds.attrs["dds_iterations"]),
+            {"units": "1", "long_name": "diameter-defined Strahler passes"},
+        )
+        ds["dds_converged"] = (
+            (),
+            int(ds.attrs["dds_converged"]),
+            {"units": "1", "long_name": "diameter-defined Strahler converged (1) or not (0)"},
+        )
+        ds.attrs = {}
+        asym_parts[key] = ds[list(_ASYMMETRY_VARS)]
+        morph_parts[key] = ds.drop_vars(list(_ASYMMETRY_VARS))
+        comp, _ = _comparison_part(ds, reference, orders)
+        comp_parts[key] = comp
+    n_seeds = {k: sum(1 for r in runs if r.cell(dims) == k) for k in best}
+    trunks = {r.path: _main_trunks_of(r) for r in runs}  # read once: the spread and the tortuosity use them
+    extra = {
+        "best_seed": _cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
+        "best_run_id": _cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
+        "best_cost": _cell_var(
+            best,
+            lambda r: r.cost["total"],
+            np.float64,
+            _COST_META["total"][0],
+            "final annealed total cost C of the lowest-cost run",
+        ),
+        "n_seeds": {
+            k: xr.DataArray(np.int64(n), attrs={"units": "1", "long_name": "complete runs (seeds) in the cell"})
+            for k, n in n_seeds.items()
+        },
+        "trunk_spread": {
+            k: xr.DataArray(
+                _trunk_spread_of([trunks[r.path] for r in runs if r.cell(dims) == k]),
+                attrs={
+                    "units": "m",
+                    "long_name": "mean distance between the main trunks of two seeds, over pairs of seeds "
+                    "(vasc_pipeline.similarity; NaN with one seed)",
+                },
+            )
+            for k in best
+        },
+        "trunk_tortuosity": _cell_var(
+            best,
+            lambda r: np.mean([tortuosity(t) for t in trunks[r.path]]),
+            np.float64,
+            "1",
+            "main trunk arc length over chord, mean over inlets, of the best tree (1: straight)",
+        ),
+    }
+    for name, values in extra.items():
+        for key in best:
+            morph_parts[key][name] = values[key]
+    for key, r in best.items():
+        gamma = as_float(r.physics.get("gamma"))
+        asym_parts[key]["symmetric_ratio"] = xr.DataArray(
+            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
+        )
+
+    morphometry = _stack(morph_parts, dims, cell_coords)
+    morphometry.attrs.update(
+        title="Order-wise morphometry of the lowest-cost tree of every cell",
+        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
+        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
+    )
+    asymmetry = _stack(asym_parts, dims, cell_coords)
+    asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
+    comparison = _stack(comp_parts, dims, cell_coords)
+    comparison = comparison.assign_coords(
+        artery=("artery", np.array(ARTERIES, dtype=object), {"long_name": "coronary artery (Kassab 1993)"})
+    )
+    comparison["order"].attrs.update(long_name=f"vessel order (shifted: highest = {_m.TOP_ORDER})", units="1")
+    comparison.attrs.update(
+        title="Model (lowest-cost tree per cell) against Kassab et al. 1993",
+        scheme=COMPARISON_SCHEME,
+        level=COMPARISON_LEVEL,
+    )
+    costs = _costs(runs, best, dims, cell_coords)
+    traces = _traces(runs, dims, cell_coords)
+    kassab = _strings_as_objects(reference)
+
+    tissues = sorted({r.tissue for r in runs})
+    root = xr.Dataset(
+        attrs={
+            "title": "vasc_pipeline sweep summary",
+            "Conventions": "CF-1.10",
+            "history": f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')}: vasc_pipeline.reduce",
+            "output_dir": str(Path(output_dir).resolve()) if output_dir is not None else "",
+            "cell_dims": list(dims),
+            "n_runs": len(runs),
+            "n_cells": len(best),
+            "tissues": tissues,
+            "comparison_scheme": COMPARISON_SCHEME,
+            "comparison_level": COMPARISON_LEVEL,
+        }
+    )
+    groups = {
+        "/": root,
+        "/morphometry": morphometry,
+        "/asymmetry": asymmetry,
+        "/costs": costs,
+        "/traces": traces,
+        "/kassab": kassab,
+        "/comparison": comparison,
+    }
+    if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
+        for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
+            groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
+    if "method" not in dims:  # one method: likewise
+        method = runs[0].method
+        for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
+            groups[name] = groups[name].assign_coords(method=((), method, _CELL_META["method"]))
+    for ds in groups.values():
+        _strings_as_objects(ds, inplace=True)
+    return xr.DataTree.from_dict(groups), best, dims
+
+
+def _strings_as_objects(ds: xr.Dataset, inplace: bool = False) -> xr.Dataset:
+    """Fixed-width unicode -> object arrays: Zarr v3 stores those as its spec'd ``string`` type."""
+    if not inplace:
+        ds = ds.copy()
+    for name in list(ds.variables):
+        var = ds.variables[name]
+        if var.dtype.kind == "U":
+            if name in ds.coords:
+                ds.coords[name] = var.copy(data=var.values.astype(object))
+            else:
+                ds[name] = var.copy(data=var.values.astype(object))
+    return ds
+
+
+def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
+    seeds = sorted({r.seed for r in runs})
+    shape = [len(cell_coords[d]) for d in dims] + [len(seeds)]
+    index = {d: {v: i for i, v in enumerate(cell_coords[d])} for d in dims}
+    sindex = {s: i for i, s in enumerate(seeds)}
+    values = {k: np.full(shape, np.nan) for k in COST_KEYS}
+    steps_done = np.zeros(shape, dtype=np.int64)
+    wall = np.full(shape, np.nan)
+    run_id = np.full(shape, "", dtype=object)
+    is_best = np.zeros(shape, dtype=np.int8)
+    cavity = np.full(shape, np.nan)
+    for r in runs:
+        at = tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (sindex[r.seed],)
+        for k in COST_KEYS:
+            values[k][at] = r.cost[k]
+        cavity[at] = r.statistics.get("cavity_share", np.nan)
+        steps_done[at], wall[at], run_id[at] = r.steps_done, r.wall_seconds, r.run_id
+        is_best[at] = best[r.cell(dims)] is r
+    full = dims + ["seed"]
+    data = {
+        f"cost_{k}": (
+            full,
+            values[k],
+            {
+                "units": _COST_META[k][0],
+                "long_name": "final " + _COST_META[k][1] + ("" if k == "total" else " (unscaled)"),
+            },
+        )
+        for k in COST_KEYS
+    }
+    data["steps_done"] = (full, steps_done, {"units": "1", "long_name": "proposed moves done (0: no run)"})
+    data["wall_seconds"] = (full, wall, {"units": "s", "long_name": "wall-clock time of the run, all sessions"})
+    data["run_id"] = (full, run_id, {"long_name": "run id (empty: no complete run)"})
+    data["is_best"] = (full, is_best, {"units": "1", "long_name": "1 for the lowest-cost run of the cell"})
+    data["cavity_share"] = (
+        full,
+        cavity,
+        {
+            "units": "1",
+            "long_name": "share of the large vessels' length (r >= r_max/4) inside the tissue's cavities "
+            "(NaN: no cavity, e.g. not the heart)",
+        },
+    )
+    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
+    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
+    return xr.Dataset(data, coords=coords, attrs={"title": "Final costs of every complete run"})
+
+
+def _traces(runs, dims, cell_coords) -> xr.Dataset:
+    seeds = sorted({r.seed for r in runs})
+    traces = {r.run_id: RunStore.open(r.path, mode="r").read_trace() for r in runs}
+    n_rec = max((len(t["step"]) for t in traces.values()), default=0)
+    shape = [len(cell_coords[d]) for d in dims] + [len(seeds), n_rec]
+    index = {d: {v: i for i, v in enumerate(cell_coords[d])} for d in dims}
+    sindex = {s: i for i, s in enumerate(seeds)}
+    names = [f[0] for f in TRACE_FIELDS]
+    # step as float64 with NaN padding: exact for step counts below 2^53, and plots need no mask
+    arrays = {n: np.full(shape, np.nan) for n in names}
+    length = np.zeros(shape[:-1], dtype=np.int64)
+    for r in runs:
+        t = traces[r.run_id]
+        at = tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (sindex[r.seed],)
+        k = len(t["step"])
+        length[at] = k
+        for n in names:
+            arrays[n][at + (slice(0, k),)] = t[n]
+    full = dims + ["seed", "record"]
+    data = {n: (full, arrays[n], {"units": _TRACE_META[n][0], "long_name": _TRACE_META[n][1]}) for n in names}
+    data["trace_length"] = (
+        dims + ["seed"],
+        length,
+        {"units": "1", "long_name": "trace records of the run (0: no run)"},
+    )
+    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
+    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
+    coords["record"] = ("record", np.arange(n_rec, dtype=np.int64), {"units": "1", "long_name": "trace record"})
+    return xr.Dataset(data, coords=coords, attrs={"title": "Cost traces of every complete run (NaN-padded)"})
+
+
+def write_summary(tree: xr.DataTree, path: str | os.PathLike) -> Path:
+    """Write the DataTree to Zarr (v3, consolidated) at ``path``, replacing any previous one.
+
+    Written to a temporary directory beside ``path`` and swapped in by renames, so a crash
+    leaves either the old or the new summary readable, never a mix (between the two renames
+    the old one is readable only as ``.<name>.old-<host>-<pid>``). The swap holds a lock, as
+    ``+stage=reduce`` may run beside a sweep's own reduction; leftovers of writers on this
+    host that no longer run are removed (the output_dir may be shared with other hosts).
+    """
+    path = Path(path)
+    writer = f"{socket.gethostname()}-{os.getpid()}"
+    tmp = path.with_name(f".{path.name}.tmp-{writer}")
+    old = path.with_name(f".{path.name}.old-{writer}")
+    _remove_leftovers(path, "tmp")
+    with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
+        warnings.simplefilter("ignore", UserWarning)
+        tree.to_zarr(tmp, mode="w", consolidated=True, zarr_format=3)
+    with file_lock(path.with_name(f".{path.name}.lock")):
+        if path.exists():
+            os.replace(path, old)
+        os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+    _remove_leftovers(path, "old")
+    return path
+
+
+def _remove_leftovers(path: Path, kind: str) -> None:
+    """Remove ``.<name>.<kind>-<host>-<pid>`` directories of this host whose process has ended."""
+    for leftover in path.parent.glob(f".{path.name}.{kind}-{socket.gethostname()}-*"):
+        pid = leftover.name.rpartition("-")[2]
+        if pid.isdigit() and not psutil.pid_exists(int(pid)):
+            shutil.rmtree(leftover, ignore_errors=True)
