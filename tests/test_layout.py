@@ -166,7 +166,7 @@ def top_level_definitions(path: Path) -> set[str]:
 @pytest.mark.parametrize(
     "package, modules",
     [
-        ("config", ["schema"]),
+        ("config", ["schema", "compose"]),
         ("engine", ["problem", "run"]),
         ("store", ["run_store"]),
         ("reduce", ["stage"]),

@@ -1,14 +1,18 @@
 """Stage 1, the configuration: the schema and its validation, composition from ``conf/``, a run's identity.
 
-:mod:`~vasc_pipeline.config.schema`: the run's dataclasses (defaults, types), :func:`validate`
-and :func:`compose`; :mod:`~vasc_pipeline.config.pipeline`: the sweep and cluster groups;
+:mod:`~vasc_pipeline.config.schema`: the run's dataclasses (defaults, types) and :func:`validate`;
+:mod:`~vasc_pipeline.config.compose`: :func:`compose` from ``conf/`` as the command line does;
+:mod:`~vasc_pipeline.config.pipeline`: the sweep and cluster groups;
 :mod:`~vasc_pipeline.config.identity`: which part of a config determines a result.
 """
 
+from . import compose as _compose
 from . import schema as _schema
+from .compose import *  # noqa: F403
 from .schema import *  # noqa: F403
 from .schema import (  # the former config module's other names, outside its __all__
     ANNEAL_INITS,
+    GAMMA_RANGE,
     INLET_ASSIGNMENTS,
     MAX_CALIBRATION_SAMPLES,
     MAX_CHECKPOINT_SECONDS,
@@ -16,18 +20,16 @@ from .schema import (  # the former config module's other names, outside its __a
     MAX_STEPS,
     PAPER_STEPS_AT_1000,
     SEED_ACCEPTED,
-    SINGLE_SWEEP,
     STAGES,
     TISSUE_KEYS_OF_EVERY_TISSUE,
-    hydra_error_message,
-    register_schema,
     seed_ok,
-    with_sweep_group,
 )
 
 __all__ = [
     *_schema.__all__,
+    *_compose.__all__,
     "ANNEAL_INITS",
+    "GAMMA_RANGE",
     "INLET_ASSIGNMENTS",
     "MAX_CALIBRATION_SAMPLES",
     "MAX_CHECKPOINT_SECONDS",
@@ -36,10 +38,6 @@ __all__ = [
     "TISSUE_KEYS_OF_EVERY_TISSUE",
     "MAX_STEPS",
     "SEED_ACCEPTED",
-    "SINGLE_SWEEP",
     "STAGES",
-    "hydra_error_message",
-    "register_schema",
     "seed_ok",
-    "with_sweep_group",
 ]

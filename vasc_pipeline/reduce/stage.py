@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from ..pipeline.outdir import sweep_in_progress
 from ..store.layout import (
     COMPARISON_CSV,
     COMPARISON_SUMMARY_CSV,
@@ -37,7 +38,6 @@ from ..store.layout import (
     run_store_paths,
 )
 from . import morphometry as _m
-from ..pipeline.outdir import sweep_in_progress
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .summary import COMPARISON_LEVEL, COMPARISON_SCHEME, build_summary, write_summary
