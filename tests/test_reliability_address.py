@@ -14,8 +14,9 @@ import threading
 import pytest
 from helpers import TINY_RUN, cli, finish
 
-from vasc_pipeline import config, orchestrate
+from vasc_pipeline import config
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.pipeline import orchestrate
 
 
 @pytest.fixture

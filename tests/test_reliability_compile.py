@@ -11,7 +11,7 @@ import time
 
 from helpers import ENV, REPO, TINY_RUN
 
-from vasc_pipeline import orchestrate
+from vasc_pipeline.pipeline import orchestrate
 
 # In a fresh process: warm up for the jobs of a sweep on `anneal=fast` (the default preset: a
 # calibrated T_start, adapted steps, a coarse exclusion map), then run one of those jobs, and list
@@ -20,7 +20,8 @@ _SCRIPT = """
 import json, sys
 import vasc_pipeline
 from numba.core.registry import CPUDispatcher
-from vasc_pipeline import config, engine, orchestrate, sweep
+from vasc_pipeline import config, engine, sweep
+from vasc_pipeline.pipeline import orchestrate
 import importlib, pkgutil
 jobs = sweep.expand(config.compose(json.loads(sys.argv[1])))
 orchestrate.compile_kernels(jobs)

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from helpers import TINY_RUN, cli, finish
 
-from vasc_pipeline import config, engine, orchestrate, planning, store, sweep
+from vasc_pipeline import config, engine, store, sweep
 from vasc_pipeline.config import ConfigError
-from vasc_pipeline.identity import INPUTS
+from vasc_pipeline.config.identity import INPUTS
+from vasc_pipeline.pipeline import orchestrate, planning
 
 H = 1e-3  # m
 
@@ -260,3 +261,18 @@ def test_reduce_with_an_override_unlike_the_runs_is_refused(tmp_path):
     assert code == 2, output
     assert "physics.gamma=3.0 (the runs: 2.1)" in output and "Nothing was reduced" in output, output
     assert not (out / "summary.zarr").exists()
+
+
+def test_a_refused_input_leaves_no_hydra_logs_behind(tmp_path):
+    """Bad input found after Hydra made its run directory (the config's validation): exit 2, and
+    neither the run's log directory nor an output_dir this run created is left."""
+    fresh = tmp_path / "fresh"
+    code, output = finish(cli(*TINY_RUN, f"output_dir={fresh}", "physics.gamma=0.01"))
+    assert code == 2 and "physics.gamma" in output, output
+    assert not fresh.exists(), sorted(p.name for p in fresh.rglob("*"))
+    kept = tmp_path / "kept"
+    (kept / "notes.txt").parent.mkdir()
+    (kept / "notes.txt").write_text("mine")
+    code, output = finish(cli(*TINY_RUN, f"output_dir={kept}", "physics.gamma=0.01"))
+    assert code == 2, output
+    assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]

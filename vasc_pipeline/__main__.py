@@ -22,6 +22,12 @@ def _main(cfg) -> None:
     from vasc_pipeline.pipeline.orchestrate import main
 
     status = main(cfg)
+    if status == 2:  # bad input: nothing ran, so Hydra's log directory of this run goes too
+        from hydra.core.hydra_config import HydraConfig
+
+        from vasc_pipeline.pipeline.outdir import forget_refused_run
+
+        forget_refused_run(HydraConfig.get().runtime.output_dir)
     if status:
         sys.exit(status)
 

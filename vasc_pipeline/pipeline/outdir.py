@@ -28,6 +28,7 @@ __all__ = [
     "check_output_dir",
     "sweep_in_progress",
     "OutputDirCallback",
+    "forget_refused_run",
 ]
 
 
@@ -126,6 +127,27 @@ def check_output_dir(output_dir: str | os.PathLike) -> Path:
     return out
 
 
+# What existed of output_dir before Hydra made its run directory (OutputDirCallback fills it):
+# a refused run removes exactly what it created (forget_refused_run).
+_BEFORE_RUN: dict[str, Any] = {}
+
+
+def forget_refused_run(run_dir: str | os.PathLike) -> None:
+    """Remove the Hydra run directory ``run_dir`` of a run refused as bad input, and
+    ``output_dir/.hydra_logs`` and ``output_dir`` themselves when this run created them and they
+    are now empty: a refused input leaves nothing behind."""
+    import shutil
+
+    run_dir = Path(run_dir)
+    if run_dir.is_dir():
+        shutil.rmtree(run_dir, ignore_errors=True)
+    for key in ("logs", "output_dir"):
+        path = _BEFORE_RUN.get(key)
+        if path is not None and not _BEFORE_RUN.get(f"{key}_existed", True):
+            with contextlib.suppress(OSError):  # not empty (something else wrote there): kept
+                path.rmdir()
+
+
 class OutputDirCallback:
     """Hydra callback (conf/config.yaml ``hydra.callbacks``): check output_dir before Hydra writes its logs there.
 
@@ -136,6 +158,9 @@ class OutputDirCallback:
     def on_run_start(self, config: Any, **kwargs: Any) -> None:
         # An empty output_dir would put results in the working directory and Hydra's logs at the
         # filesystem root; a reduction must not create the directory it was asked to read.
+        out = Path(str(config.output_dir or "")).expanduser()
+        logs = out / ".hydra_logs"
+        _BEFORE_RUN.update(output_dir=out, output_dir_existed=out.exists(), logs=logs, logs_existed=logs.exists())
         try:
             if not str(config.output_dir or "").strip():
                 raise OSError("output_dir is empty: give the directory for the results with output_dir=...")
