@@ -66,3 +66,39 @@ def test_loading_the_cached_kernels_says_nothing(monkeypatch):
     log = io.StringIO()
     orchestrate.compile_kernels(["a job"], log)
     assert log.getvalue() == ""
+
+
+def test_a_sigterm_while_compiling_ends_the_wait(monkeypatch):
+    """numba compiles inside llvmlite's ctypes callbacks, which swallow the KeyboardInterrupt
+    a signal handler raises there (seen in CI: the sweep ran on after SIGTERM). The stand-in
+    below swallows it the same way; the signal must still end compile_kernels before it ends."""
+    import os
+    import signal
+    import threading
+
+    finished = threading.Event()
+
+    def swallowing_warm_up(jobs):
+        for _ in range(40):
+            try:
+                time.sleep(0.05)
+            except KeyboardInterrupt:
+                pass
+        finished.set()
+
+    monkeypatch.setattr(orchestrate, "_warm_up", swallowing_warm_up)
+    terminated: list[int] = []
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
+    with orchestrate._terminate_as_interrupt(terminated):
+        timer.start()
+        try:
+            orchestrate.compile_kernels(["a job"], io.StringIO())
+        except KeyboardInterrupt:
+            interrupted = True
+        else:
+            interrupted = False
+        finally:
+            timer.cancel()
+    assert terminated == [signal.SIGTERM]
+    assert interrupted and not finished.is_set()
+    finished.wait(5)  # let the stand-in end before the next test

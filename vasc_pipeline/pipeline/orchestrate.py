@@ -29,6 +29,7 @@ import signal
 import sys
 import time
 import uuid
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -89,28 +90,40 @@ def compile_kernels(jobs: list[Job] | None = None, stream: TextIO | None = None)
     nothing (a generic tiny problem left ``anneal=fast``'s calibration and moves to the workers,
     which then showed 0 steps/s while compiling). Without ``jobs``: a generic tiny problem.
     When that takes longer than :data:`COMPILE_NOTICE_AFTER`, ``stream`` is told what happens.
+
+    The compilation runs in a helper thread while this one waits: numba compiles inside
+    llvmlite's ctypes callbacks, which swallow an exception raised there, so a Ctrl-C or SIGTERM
+    delivered into them was lost and the sweep ran on. Waiting here, the signal interrupts at
+    once (the helper is a daemon thread: it ends with the process).
     """
     import threading
 
-    def tell() -> None:
-        if stream is not None:
-            stream.write(
-                "vasc_pipeline: compiling the numba kernels (first run only, about 1-3 min; cached for later runs)...\n"
-            )
-            stream.flush()
+    failure: list[BaseException] = []
 
-    notice = threading.Timer(COMPILE_NOTICE_AFTER, tell)
-    notice.daemon = True
+    def compile_all() -> None:
+        try:
+            if jobs:
+                _warm_up(jobs)
+            else:
+                _warm_up_generic()
+        except BaseException as exc:  # re-raised in the caller's thread
+            failure.append(exc)
+
     started = time.monotonic()
-    notice.start()
-    try:
-        if jobs:
-            _warm_up(jobs)
-        else:
-            _warm_up_generic()
-    finally:
-        notice.cancel()
-    if stream and time.monotonic() - started > COMPILE_NOTICE_AFTER:
+    worker = threading.Thread(target=compile_all, name="vasc-compile", daemon=True)
+    worker.start()
+    worker.join(COMPILE_NOTICE_AFTER)
+    slow = worker.is_alive()
+    if slow and stream is not None:
+        stream.write(
+            "vasc_pipeline: compiling the numba kernels (first run only, about 1-3 min; cached for later runs)...\n"
+        )
+        stream.flush()
+    while worker.is_alive():
+        worker.join(0.2)
+    if failure:
+        raise failure[0]
+    if slow and stream is not None:
         stream.write(f"vasc_pipeline: kernels compiled in {time.monotonic() - started:.0f} s\n")
         stream.flush()
 
@@ -121,7 +134,7 @@ def _warm_up(jobs: list[Job]) -> None:
 
     seen = set()
     for j in jobs:
-        cfg = _config.to_run_config(j.config)  # a copy: the job's config is left as it is
+        cfg = j.run_config()
         kind = (engine.supply_dtype(cfg.n_terminals), cfg.method.name, cfg.anneal.init)
         if kind in seen:
             continue
@@ -132,9 +145,8 @@ def _warm_up(jobs: list[Job]) -> None:
 
                 grow(engine.build_problem(cfg), 0)
                 continue
-            cfg.anneal.steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
-            cfg.anneal.trace_every = 64
-            engine.run(cfg, seed=int(cfg.seed))
+            steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
+            engine.run(replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64)), seed=int(cfg.seed))
         except Exception:  # the job itself fails the same way, and its run reports it
             continue
 
@@ -142,15 +154,15 @@ def _warm_up(jobs: list[Job]) -> None:
 def _warm_up_generic() -> None:
     from .. import engine
 
-    cfg = _config.RunConfig(n_terminals=4)
-    cfg.tissue.name = "sphere"
-    cfg.anneal.steps = 16
-    cfg.anneal.trace_every = 8
+    cfg = _config.RunConfig(
+        n_terminals=4,
+        tissue=_config.TissueConfig(name="sphere", exclusion_voxel_size=None),
+        anneal=_config.AnnealConfig(steps=16, trace_every=8),
+    )
     engine.run(cfg, seed=0)
     from ..engine.cco import grow  # the CCO growth kernel too (method=cco, anneal.init=cco)
 
-    cfg.method.name = "cco"
-    grow(engine.build_problem(cfg), 0)
+    grow(engine.build_problem(replace(cfg, method=_config.MethodConfig(name="cco"))), 0)
 
 
 def _dask_run_job(job: Job) -> dict:
