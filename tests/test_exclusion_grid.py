@@ -77,10 +77,18 @@ def test_one_segment_sums_the_same_by_hand_on_two_supply_grids():
     assert on_own_grids[1] > 50 * on_own_grids[0]
 
 
-def test_a_fixed_tree_costs_the_same_exclusion_on_the_hearts_of_n_500_and_6000():
+DEFAULT_HEART_GRID = config.to_run_config(config.compose([])).tissue.exclusion_voxel_size
+
+
+def test_the_heart_default_is_a_fixed_grid():
+    assert DEFAULT_HEART_GRID == pytest.approx(build_tissue("heart", 500).voxel_size, rel=1e-12)
+
+
+@pytest.mark.parametrize("fixed", [DEFAULT_HEART_GRID, 5.0e-4], ids=["default", "0.5mm"])
+def test_a_fixed_tree_costs_the_same_exclusion_on_the_hearts_of_n_500_and_6000(fixed):
     """One tree, the tissues that N = 500 and N = 6000 build (supply voxels 1.15 and 0.50 mm):
-    the same exclusion within 10 % on one fixed grid, against ~300x on the supply grids."""
-    fixed = 5.0e-4
+    the same exclusion within 10 % on one fixed grid (the default's, and a finer one), against
+    ~300x on the supply grids."""
     tissues = {n: build_tissue("heart", n, exclusion_voxel_size=fixed) for n in (500, 6000)}
     assert tissues[500].voxel_size > 2 * tissues[6000].voxel_size
     problem = make_problem("tissue=heart", "n_terminals=500", "anneal=fast_v1")
@@ -148,6 +156,7 @@ def test_null_keeps_the_supply_grid_bit_for_bit():
     a fixed-seed run equals the one recorded before the key existed."""
     overrides = [
         "tissue=heart",
+        "tissue.exclusion_voxel_size=null",
         "n_terminals=80",
         "anneal=fast_v1",
         "anneal.coarse_exclusion_factor=2",

@@ -7,7 +7,6 @@ in this process) of the same job config. Jobs are tiny: 300k proposals on 16/24 
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import io
 import json
@@ -27,6 +26,7 @@ import xarray as xr
 from helpers import ENV, TIMEOUT, cli, finish, free_port  # noqa: E402
 
 from vasc_pipeline import config, engine, job, store, sweep
+from vasc_pipeline.config.frozen import thawed
 from vasc_pipeline.model.tree import Tree, check_tree
 from vasc_pipeline.pipeline import orchestrate
 
@@ -286,7 +286,7 @@ def finished_output(tmp_path_factory):
 
 def _bad(cfg: config.RunConfig, **changes) -> config.RunConfig:
     """A copy of ``cfg`` with fields set past validation (as a hand-written script could)."""
-    cfg = copy.deepcopy(cfg)
+    cfg = thawed(cfg)
     for dotted, value in changes.items():
         section, _, name = dotted.rpartition("__")
         target = getattr(cfg, section) if section else cfg

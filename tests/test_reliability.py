@@ -16,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -453,7 +454,7 @@ def test_9_slurm_scheduler_uses_temporary_tls_unless_allowed_insecure(tmp_path):
         assert http <= {"127.0.0.1"}, http  # dashboard off: its HTTP server only on loopback
     finally:
         cl.close()
-    cluster.allow_insecure = True
+    cluster = replace(cluster, allow_insecure=True)  # a validated config is frozen
     cl = orchestrate.slurm_cluster(cluster, tmp_path)
     try:
         assert cl.scheduler_address.startswith("tcp://")

@@ -3,6 +3,7 @@
 :mod:`~vasc_pipeline.config.schema`: the run's dataclasses (defaults, types) and :func:`validate`;
 :mod:`~vasc_pipeline.config.compose`: :func:`compose` from ``conf/`` as the command line does;
 :mod:`~vasc_pipeline.config.pipeline`: the sweep and cluster groups;
+:mod:`~vasc_pipeline.config.frozen`: a validated config is frozen (checked once, then only read);
 :mod:`~vasc_pipeline.config.identity`: which part of a config determines a result.
 """
 

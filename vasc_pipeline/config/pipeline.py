@@ -12,11 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Optional
 
+from .frozen import Settings
+
 __all__ = ["SweepConfig", "TLSConfig", "SlurmConfig", "ClusterConfig"]
 
 
 @dataclass
-class SweepConfig:
+class SweepConfig(Settings):
     """A grid of runs; ``None`` on an axis means the single value of the base config.
 
     Run ids come from the grid coordinates (tissue, N, m_b, seed, and steps when the
@@ -31,7 +33,7 @@ class SweepConfig:
 
 
 @dataclass
-class TLSConfig:
+class TLSConfig(Settings):
     """Dask TLS settings (distributed.security.Security) for cluster=address / cluster=slurm."""
 
     ca_file: Optional[str] = None  # PEM file of the certificate authority
@@ -41,7 +43,7 @@ class TLSConfig:
 
 
 @dataclass
-class SlurmConfig:
+class SlurmConfig(Settings):
     """dask-jobqueue SLURMCluster options: one single-threaded worker per SLURM task slot."""
 
     queue: Optional[str] = None  # partition (-p)
@@ -57,7 +59,7 @@ class SlurmConfig:
 
 
 @dataclass
-class ClusterConfig:
+class ClusterConfig(Settings):
     """Where the jobs run: ``local`` (LocalCluster), ``address`` (existing scheduler) or ``slurm``."""
 
     name: str = "local"

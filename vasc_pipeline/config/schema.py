@@ -15,8 +15,9 @@ import json
 import math
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
+from .frozen import Settings, freeze, is_frozen, thawed
 from .pipeline import ClusterConfig, SlurmConfig, SweepConfig, TLSConfig
 
 __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-exported: public API)
@@ -37,6 +38,10 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "SlurmConfig",
     "to_run_config",
     "validate",
+    "Rule",
+    "SWEPT_KEYS",
+    "sweep_axis",
+    "HEART_EXCLUSION_VOXEL_SIZE",
     "scheduled_steps",
     "packing_steps",
     "CONFIG_DIR",
@@ -47,6 +52,7 @@ _PACKAGE_DIR = Path(__file__).resolve().parents[1]  # vasc_pipeline/
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
 STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
+HEART_EXCLUSION_VOXEL_SIZE = 1.1533753893850243e-3  # m: R_supply / 4 of the heart at N = 500
 # Upper bounds, so that a typo'd exponent is refused here rather than overflowing after dispatch
 # (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
 MAX_STEPS = 10**15
@@ -110,7 +116,7 @@ class ConfigError(ValueError):
 
 
 @dataclass
-class LabelsConfig:
+class LabelsConfig(Settings):
     """tissue=mask: which label values of the mask (a NIfTI or NRRD label map, or any integer
     array) play which part; all None: nonzero = tissue."""
 
@@ -120,12 +126,13 @@ class LabelsConfig:
 
 
 @dataclass
-class TissueConfig:
+class TissueConfig(Settings):
     name: str = "heart"
     voxel_size: Optional[float] = None  # m; None: R_supply / 4 (~270 voxels per supply sphere)
     # The grid the exclusion term is summed on, m, fixed whatever N (its D and L are in its
     # voxels); None: the supply grid above (whose voxel follows N unless voxel_size is set).
-    exclusion_voxel_size: Optional[float] = None
+    # The heart's, the default tissue: its supply voxel at N = 500; the other tissues set None.
+    exclusion_voxel_size: Optional[float] = HEART_EXCLUSION_VOXEL_SIZE
     q_required: Optional[float] = None  # s^-1; None: the N supply spheres fill the tissue
     radius: float = 0.02  # sphere radius, m
     size: list[float] = field(default_factory=lambda: [0.04, 0.04, 0.02])  # box edges [x, y, z], m
@@ -158,7 +165,7 @@ class TissueConfig:
 
 
 @dataclass
-class PhysicsConfig:
+class PhysicsConfig(Settings):
     gamma: float = 2.1  # bifurcation exponent
     inlet_radius: float = 2.1e-3  # combined inlet radius r_in, m
     total_flow: float = 4.16e-6  # Q0, m^3 s^-1
@@ -174,57 +181,58 @@ class PhysicsConfig:
 
 
 @dataclass
-class AnnealConfig:
-    """The schedule and moves. ``anneal=paper`` and ``anneal=fast`` (conf/anneal/) are presets."""
+class AnnealConfig(Settings):
+    """The schedule and moves. The defaults are ``anneal=fast``'s, the composed default;
+    ``anneal=paper`` and ``anneal=fast_v1`` (conf/anneal/) set every value they differ in."""
 
-    name: str = "paper"
-    T_start: Optional[float] = 1e10  # W; None: calibrated so uphill moves start accept_start accepted
-    T_end: Optional[float] = 1e-5  # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
+    name: str = "fast"
+    T_start: Optional[float] = None  # W; None: calibrated so uphill moves start accept_start accepted
+    T_end: Optional[float] = None  # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
     accept_start: float = 0.8  # mean acceptance of uphill moves at a calibrated T_start
     T_end_rel: float = 1e-4  # calibrated T_end relative to w(1) R_supply
     calibration_samples: int = 4000  # infinite-temperature moves measured for T_start
     steps: Optional[int] = None  # proposed moves; None: steps_at_1000 * (N / 1000)^steps_exponent
-    steps_at_1000: float = PAPER_STEPS_AT_1000
-    steps_exponent: float = 2.0  # budget law in N (the paper's guess: 2)
+    steps_at_1000: float = 6.25e7  # the paper: PAPER_STEPS_AT_1000
+    steps_exponent: float = 1.7  # budget law in N (the paper's guess: 2)
     packing_steps_per_terminal: float = 0.0  # packing phase (supply alone, terminals only) before the tree
     # anneal, in proposals per terminal, part of the steps; 0: none
     packing_T_start: float = 1.0  # its temperature at the start, in voxels of one supply sphere
     packing_T_end: float = 0.05  # ... and at its end, in C_s units
-    p_swap: float = 0.5  # probability that a proposal is a swap
-    p_local: float = 0.0  # probability that a swap partner is a spatial neighbour (else uniform)
-    neighbour_cell: float = 1.0  # edge of the neighbour cells, in R_supply
+    p_swap: float = 0.3  # probability that a proposal is a swap
+    p_local: float = 0.9  # probability that a swap partner is a spatial neighbour (else uniform)
+    neighbour_cell: float = 2.0  # edge of the neighbour cells, in R_supply
     step_terminal: float = 0.5  # translation half-width for terminals, in R_supply (the cap when adapted)
     step_bifurcation: float = 1.0  # translation half-width for bifurcations, in R_supply (the cap when adapted)
-    supply_T_start: Optional[float] = None  # supply's own temperature at step 0, in units of the voxels of one
+    supply_T_start: Optional[float] = 1.0  # supply's own temperature at step 0, in units of the voxels of one
     # supply sphere; None: supply is searched downhill throughout (the paper)
     supply_T_end: float = 0.05  # ... at the end of its phase, in C_s units (0.05: +1 accepted at e^-20)
-    supply_phase: float = 0.5  # fraction of the steps the supply schedule runs; then the true weight
-    adapt_steps: bool = False  # adapt half-widths to keep acceptance near acceptance_target
-    full_width_phase: float = 1.0  # with adapted steps: fraction of the steps in which half of the terminal
+    supply_phase: float = 0.8  # fraction of the steps the supply schedule runs; then the true weight
+    adapt_steps: bool = True  # adapt half-widths to keep acceptance near acceptance_target
+    full_width_phase: float = 0.4  # with adapted steps: fraction of the steps in which half of the terminal
     # moves keep the full width step_terminal; afterwards every terminal move takes the adapted step
-    cold_from: Optional[float] = None  # where the schedule's cold part starts, as a share of the way from
+    cold_from: Optional[float] = 0.5  # where the schedule's cold part starts, as a share of the way from
     # T_start to T_end in log T; None: one exponential from T_start to T_end
-    cold_share: Optional[float] = None  # with cold_from: the share of the tree anneal's steps spent in it
-    coarse_exclusion_factor: Optional[int] = None  # the exclusion term on a depth map this many times
+    cold_share: Optional[float] = 0.2  # with cold_from: the share of the tree anneal's steps spent in it
+    coarse_exclusion_factor: Optional[int] = 2  # the exclusion term on a depth map this many times
     # coarser (ExclusionGrid.coarsened) over the first coarse_exclusion_phase of the tree anneal's steps,
     # then on the true one; None: the true map throughout
-    coarse_exclusion_phase: Optional[float] = None
-    acceptance_target: float = 0.3  # per node class (terminal, bifurcation)
+    coarse_exclusion_phase: Optional[float] = 0.4
+    acceptance_target: float = 0.1  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
-    polish: bool = False  # optimise the final topology's bifurcation positions (finish.polish)
-    polish_swaps_max_terminals: int = 0  # with polish, up to this N: single-swap descent (finish.descend_swaps)
+    polish: bool = True  # optimise the final topology's bifurcation positions (finish.polish)
+    polish_swaps_max_terminals: int = 8  # with polish, up to this N: single-swap descent (finish.descend_swaps)
     trace_every: int = 100_000  # steps between trace records
     init: str = "random"  # initial tree: "random" (the paper's) or "cco" (vasc_pipeline.engine.cco, method.* settings)
 
 
 @dataclass
-class TerminalsConfig:
+class TerminalsConfig(Settings):
     path: Optional[str] = None  # CSV of x, y, z (m)
     fixed: bool = False  # fixed sites never move; the supply term is off
 
 
 @dataclass
-class MethodConfig:
+class MethodConfig(Settings):
     """How the tree is grown: ``method=anneal`` (default) or ``method=cco`` (conf/method/)."""
 
     name: str = "anneal"
@@ -235,12 +243,12 @@ class MethodConfig:
 
 
 @dataclass
-class CheckpointConfig:
+class CheckpointConfig(Settings):
     every_seconds: float = 60.0
 
 
 @dataclass
-class RunConfig:
+class RunConfig(Settings):
     n_terminals: int = 200
     seed: int = 0
     output_dir: str = "results/default"
@@ -285,6 +293,50 @@ def seed_ok(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**63
 
 
+@dataclass(frozen=True)
+class Rule:
+    """The values a key accepts: numbers of ``kind`` (an int may be written 1e5) passing ``ok``."""
+
+    kind: type
+    ok: Callable[[Any], bool]
+    accepted: str
+
+    def check(self, name: str, value: Any) -> Any:
+        """``value`` as ``kind``; a :class:`ConfigError` naming ``name`` when it is not accepted."""
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if number and self.kind is int:
+            number = float(value).is_integer()
+        if not number or not self.ok(self.kind(value)):
+            raise ConfigError(f"{name} must be {self.accepted}, got {value!r}")
+        return self.kind(value)
+
+
+# The keys a sweep can scan: one rule each, for the key (n_terminals, physics.m_b, seed,
+# anneal.steps) and for its axis (sweep.n_terminals, sweep.m_b, sweep.seeds, sweep.steps).
+SWEPT_KEYS = {
+    "n_terminals": Rule(int, lambda v: v >= 2, "an integer >= 2"),
+    "m_b": Rule(float, lambda v: v > 0 and math.isfinite(v), "a finite number > 0"),
+    "seeds": Rule(int, seed_ok, SEED_ACCEPTED),
+    "steps": Rule(int, lambda v: 1 <= v <= MAX_STEPS, f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)"),
+}
+
+
+def sweep_axis(axis: str, values: Any, default: Any) -> list:
+    """The values of ``sweep.<axis>``: a non-empty list of distinct accepted values, or ``[default]``
+    when the axis is not given."""
+    if values is None:
+        return [default]
+    name, rule = f"sweep.{axis}", SWEPT_KEYS[axis]
+    values = list(values)
+    if not values:
+        raise ConfigError(f"{name} must be a non-empty list ({rule.accepted}), got []")
+    out = [rule.check(f"{name}[{i}]", v) for i, v in enumerate(values)]
+    dupes = sorted({v for v in out if out.count(v) > 1})
+    if dupes:
+        raise ConfigError(f"{name} lists {dupes} more than once; every grid point must be distinct")
+    return out
+
+
 def _check_finite(node: Any, name: str) -> None:
     """Every float anywhere in the config must be finite (NaN and inf pass every range check)."""
     if hasattr(node, "__dataclass_fields__"):
@@ -315,20 +367,27 @@ def packing_steps(cfg: RunConfig) -> int:
 
 
 def validate(cfg: RunConfig) -> RunConfig:
-    """Check every range the model needs; raise :class:`ConfigError` naming the field."""
+    """Check every range the model needs; raise :class:`ConfigError` naming the field.
+
+    Returns a validated copy, frozen (:mod:`vasc_pipeline.config.frozen`): the engine and the
+    planner take it as it is. A frozen config was validated already and is returned unchanged.
+    """
     from ..model.tissue import TISSUES
 
+    if is_frozen(cfg):
+        return cfg
+    cfg = thawed(cfg)
     _check_finite(cfg, "")
     if not str(cfg.output_dir).strip():
         raise ConfigError("output_dir must name a directory, got an empty string; give one with output_dir=...")
-    if not seed_ok(cfg.seed):
-        raise ConfigError(f"seed must be {SEED_ACCEPTED}, got {cfg.seed!r}")
+    SWEPT_KEYS["seeds"].check("seed", cfg.seed)
+    SWEPT_KEYS["n_terminals"].check("n_terminals", cfg.n_terminals)
+    if cfg.anneal.steps is not None:
+        SWEPT_KEYS["steps"].check("anneal.steps", cfg.anneal.steps)
+    SWEPT_KEYS["m_b"].check("physics.m_b", cfg.physics.m_b)
     if cfg.sweep is not None:
-        for i, seed in enumerate(cfg.sweep.seeds or ()):
-            if not seed_ok(seed):
-                raise ConfigError(f"sweep.seeds[{i}] must be {SEED_ACCEPTED}, got {seed!r}")
-    if not isinstance(cfg.n_terminals, int) or cfg.n_terminals < 2:
-        raise ConfigError(f"n_terminals must be an integer >= 2, got {cfg.n_terminals}")
+        for axis in SWEPT_KEYS:
+            sweep_axis(axis, getattr(cfg.sweep, axis), None)
     if cfg.tissue.inlets is not None:
         if not cfg.tissue.inlets:
             raise ConfigError("tissue.inlets must hold at least one [x, y, z] position in metres (or be null), got []")
@@ -377,7 +436,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _check_tissue_keys(cfg.tissue)
     _check_labels(cfg.tissue.labels)
     p = cfg.physics
-    for name in ("gamma", "inlet_radius", "total_flow", "m_b", "viscosity", "A_wv"):
+    for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
     for name in ("r_cutoff", "A_o", "A_p", "A_s"):
         value = getattr(p, name)
@@ -446,10 +505,6 @@ def validate(cfg: RunConfig) -> RunConfig:
             )
     if not 0.0 <= a.p_local <= 1.0:
         raise ConfigError(f"anneal.p_local must lie in [0, 1], got {a.p_local}")
-    if a.steps is not None and (not isinstance(a.steps, int) or not 1 <= a.steps <= MAX_STEPS):
-        raise ConfigError(
-            f"anneal.steps must be an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run), got {a.steps}"
-        )
     _positive("anneal.steps_at_1000", a.steps_at_1000)
     if a.steps is None and scheduled_steps(cfg) > MAX_STEPS:
         raise ConfigError(
@@ -499,7 +554,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _validate_method(cfg)
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
-    return cfg
+    return freeze(cfg)
 
 
 def _check_labels(labels: LabelsConfig) -> None:

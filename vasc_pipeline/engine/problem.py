@@ -72,7 +72,11 @@ def node_radii(tree: Tree, physics: Physics) -> np.ndarray:
 
 
 def build_problem(config: Any) -> Problem:
-    """Validate a config and build its tissue, physics and kernel model."""
+    """Build a config's tissue, physics and kernel model.
+
+    A validated (frozen) config is taken as it is; a RunConfig, dict or OmegaConf node is
+    validated first (:func:`vasc_pipeline.config.validate`).
+    """
     cfg = validate(to_run_config(config))
     params = {k: v for k, v in asdict(cfg.tissue).items() if k != "name"}
     n = cfg.n_terminals

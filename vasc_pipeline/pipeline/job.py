@@ -112,7 +112,7 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
         ``warnings`` (checkpoint fallbacks, as text).
     """
     started, cpu_started = time.perf_counter(), time.process_time()
-    problem = engine.build_problem(job.config)
+    problem = engine.build_problem(job.run_config())
     seen: list[str] = []
     with run_lock(job.store):
         store = ensure_store(job, problem.total_steps)

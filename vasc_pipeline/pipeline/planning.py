@@ -65,7 +65,7 @@ def plan(cfg: Any) -> Plan:
         n = j.coords["n_terminals"]
         if n not in checked:  # everything but N is shared by the grid's tissues
             checked[n] = 1
-            engine.build_problem(j.config)
+            engine.build_problem(j.run_config())
         total_steps[j.run_id] = _config.scheduled_steps(j.run_config())
     return Plan(cfg, jobs, total_steps)
 

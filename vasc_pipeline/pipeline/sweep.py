@@ -14,13 +14,12 @@ existing store, never silently mixed.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from ..config.identity import INPUTS, input_digests
-from ..config.schema import MAX_STEPS, SEED_ACCEPTED, ConfigError, RunConfig, seed_ok, to_run_config, validate
+from ..config.schema import ConfigError, RunConfig, sweep_axis, to_run_config, validate
 from ..model.tissue.shapes import mask_geometry
 from ..store.layout import cell_id, run_id, run_path
 
@@ -41,10 +40,12 @@ class Job:
         tissue, n_terminals, m_b [W m^-3], seed, steps (None without a steps axis), method
         ("anneal" or "cco").
     config : dict
-        The run's own resolved config (plain types, no sweep or cluster section); paths
-        are absolute so that workers anywhere find them.
+        The run's own resolved config (plain types, no sweep or cluster section): what its
+        store records as its identity. Paths are absolute so that workers anywhere find them.
     store : str
         Absolute path of the run store.
+    validated : RunConfig, optional
+        The same config validated (frozen) when the sweep was expanded: what the job runs.
     """
 
     run_id: str
@@ -52,9 +53,11 @@ class Job:
     coords: dict = field(hash=False)
     config: dict = field(hash=False, repr=False)
     store: str = ""
+    validated: RunConfig | None = field(default=None, hash=False, repr=False, compare=False)
 
     def run_config(self) -> RunConfig:
-        return to_run_config(self.config)
+        """The run's validated config (validated here for a job built without one)."""
+        return self.validated if self.validated is not None else validate(to_run_config(self.config))
 
 
 def stored_config(run_cfg: RunConfig) -> dict:
@@ -73,27 +76,6 @@ def stored_config(run_cfg: RunConfig) -> dict:
     if run_cfg.method.name == "cco":
         config.pop("anneal", None)
     return config
-
-
-def _axis(name: str, values: Any, default: Any, kind: type, check, accepted: str) -> list:
-    """A validated grid axis: a non-empty list of distinct values passing ``check``."""
-    if values is None:
-        return [default]
-    values = list(values)
-    if not values:
-        raise ConfigError(f"{name} must be a non-empty list ({accepted}), got []")
-    out = []
-    for i, v in enumerate(values):
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
-        if kind is int:
-            ok = ok and float(v).is_integer()
-        if not ok or not check(v):
-            raise ConfigError(f"{name}[{i}] must be {accepted}, got {v!r}")
-        out.append(kind(v))
-    dupes = sorted({v for v in out if out.count(v) > 1})
-    if dupes:
-        raise ConfigError(f"{name} lists {dupes} more than once; every grid point must be distinct")
-    return out
 
 
 def _mask_geometry(tissue) -> dict:
@@ -140,36 +122,11 @@ def expand(cfg: Any) -> list[Job]:
     """
     cfg = validate(to_run_config(cfg))  # the base config as given (job_config resolves output_dir)
     sw = cfg.sweep
-    ns = _axis(
-        "sweep.n_terminals",
-        sw and sw.n_terminals,
-        cfg.n_terminals,
-        int,
-        lambda v: v >= 2,
-        "an integer >= 2 (terminal nodes)",
-    )
-    mbs = _axis(
-        "sweep.m_b",
-        sw and sw.m_b,
-        cfg.physics.m_b,
-        float,
-        lambda v: v > 0 and math.isfinite(v),
-        "a finite number > 0 (W m^-3)",
-    )
-    seeds = _axis("sweep.seeds", sw and sw.seeds, cfg.seed, int, lambda v: seed_ok(int(v)), SEED_ACCEPTED)
+    ns = sweep_axis("n_terminals", sw and sw.n_terminals, cfg.n_terminals)
+    mbs = sweep_axis("m_b", sw and sw.m_b, cfg.physics.m_b)
+    seeds = sweep_axis("seeds", sw and sw.seeds, cfg.seed)
     has_steps = sw is not None and sw.steps is not None
-    steps_axis = (
-        _axis(
-            "sweep.steps",
-            sw.steps,
-            None,
-            int,
-            lambda v: 1 <= v <= MAX_STEPS,
-            f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)",
-        )
-        if has_steps
-        else [None]
-    )
+    steps_axis = sweep_axis("steps", sw.steps, None) if has_steps else [None]
     tissue = cfg.tissue.name
     method = cfg.method.name
     if method == "cco" and has_steps:
@@ -188,7 +145,14 @@ def expand(cfg: Any) -> list[Job]:
             config[INPUTS] = dict(digests)
         coords = {"tissue": tissue, "n_terminals": n, "m_b": m_b, "seed": seed, "steps": steps, "method": method}
         jobs.append(
-            Job(rid, cell_id(tissue, n, m_b, steps, method), coords, config, str(run_path(run_cfg.output_dir, rid)))
+            Job(
+                rid,
+                cell_id(tissue, n, m_b, steps, method),
+                coords,
+                config,
+                str(run_path(run_cfg.output_dir, rid)),
+                validated=run_cfg,
+            )
         )
     ids = [j.run_id for j in jobs]
     if len(set(ids)) != len(ids):  # two m_b equal to 10 significant digits
