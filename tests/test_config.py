@@ -54,6 +54,24 @@ def test_a_derived_config_is_validated_in_its_turn():
     cfg = config.compose(["n_terminals=64"])
     with pytest.raises(config.ConfigError, match="n_terminals must be an integer >= 2"):
         config.validate(replace(cfg, n_terminals=1))
+    with pytest.raises(config.ConfigError, match=r"n_terminals must be an integer >= 2, got 64\.5"):
+        config.validate(replace(cfg, n_terminals=64.5))
+    whole = config.validate(replace(cfg, n_terminals=64.0, seed=3.0))  # a count written as a float
+    assert (whole.n_terminals, whole.seed) == (64, 3) and isinstance(whole.n_terminals, int)
+
+
+def test_a_swept_key_and_its_axis_share_one_rule():
+    messages = []
+    for overrides in (["n_terminals=1"], ["sweep.n_terminals=[16,1]"], ["anneal.steps=0"], ["sweep.steps=[0]"]):
+        with pytest.raises(config.ConfigError) as info:
+            config.compose(["tissue=sphere", *overrides])
+        messages.append(str(info.value))
+    assert messages == [
+        "n_terminals must be an integer >= 2, got 1",
+        "sweep.n_terminals[1] must be an integer >= 2, got 1",
+        "anneal.steps must be an integer in [1, 1e+15] (proposed moves per run), got 0",
+        "sweep.steps[0] must be an integer in [1, 1e+15] (proposed moves per run), got 0",
+    ]
 
 
 @pytest.fixture

@@ -219,8 +219,8 @@ class AnnealConfig(Settings):
     coarse_exclusion_phase: Optional[float] = 0.4
     acceptance_target: float = 0.1  # per node class (terminal, bifurcation)
     adapt_window: int = 1000  # proposals of a class between adaptations
-    polish: bool = True  # optimise the final topology's bifurcation positions (finish.polish)
-    polish_swaps_max_terminals: int = 8  # with polish, up to this N: single-swap descent (finish.descend_swaps)
+    polish: bool = True  # optimise the final topology's bifurcation positions (engine.polish)
+    polish_swaps_max_terminals: int = 8  # with polish, up to this N: single-swap descent (engine.polish.descend_swaps)
     trace_every: int = 100_000  # steps between trace records
     init: str = "random"  # initial tree: "random" (the paper's) or "cco" (vasc_pipeline.engine.cco, method.* settings)
 
@@ -380,11 +380,12 @@ def validate(cfg: RunConfig) -> RunConfig:
     _check_finite(cfg, "")
     if not str(cfg.output_dir).strip():
         raise ConfigError("output_dir must name a directory, got an empty string; give one with output_dir=...")
-    SWEPT_KEYS["seeds"].check("seed", cfg.seed)
-    SWEPT_KEYS["n_terminals"].check("n_terminals", cfg.n_terminals)
+    # as their kind: a script's n_terminals=5.0 is run as 5
+    cfg.seed = SWEPT_KEYS["seeds"].check("seed", cfg.seed)
+    cfg.n_terminals = SWEPT_KEYS["n_terminals"].check("n_terminals", cfg.n_terminals)
     if cfg.anneal.steps is not None:
-        SWEPT_KEYS["steps"].check("anneal.steps", cfg.anneal.steps)
-    SWEPT_KEYS["m_b"].check("physics.m_b", cfg.physics.m_b)
+        cfg.anneal.steps = SWEPT_KEYS["steps"].check("anneal.steps", cfg.anneal.steps)
+    cfg.physics.m_b = SWEPT_KEYS["m_b"].check("physics.m_b", cfg.physics.m_b)
     if cfg.sweep is not None:
         for axis in SWEPT_KEYS:
             sweep_axis(axis, getattr(cfg.sweep, axis), None)
