@@ -94,7 +94,7 @@ def row_of(path: Path, root: Path) -> dict:
     c, physics = a["cost_recomputed"], a["physics"]
     tree = store.read_tree()
     parent, kind = tree["parent"], tree["kind"]
-    tissue = engine.build_problem(config.to_run_config(a["config"])).tissue
+    tissue = engine.build_problem(config.from_stored(a["config"])).tissue
     exclusion = exclusion_by_segment(tissue, physics, tree)
     row = {
         "variant": variant,

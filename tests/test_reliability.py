@@ -458,6 +458,9 @@ def test_9_slurm_scheduler_uses_temporary_tls_unless_allowed_insecure(tmp_path):
     cl = orchestrate.slurm_cluster(cluster, tmp_path)
     try:
         assert cl.scheduler_address.startswith("tcp://")
+        # the worker jobs' logs go with the results, not into the directory the sweep started from
+        logs = re.findall(r"#SBATCH -[eo] (\S+)", cl.job_script())
+        assert logs and all(Path(log).parent == tmp_path / ".slurm_logs" for log in logs), logs
     finally:
         cl.close()
 
@@ -511,7 +514,8 @@ def test_10_dry_run_prints_the_slurm_job_script_and_runs_nothing(tmp_path):
     assert "#SBATCH -t 01:00:00" in output and "distributed.cli.dask_worker" in output, output
     # workers retire 6 minutes (10 %) before the walltime, give or take 90 s
     assert "--lifetime 3240s --lifetime-stagger 90s" in output, output
-    assert not (tmp_path / "runs").exists()
+    assert f"#SBATCH -o {tmp_path}/.slurm_logs/" in output, output
+    assert not (tmp_path / "runs").exists() and not (tmp_path / ".slurm_logs").exists()
 
 
 @pytest.mark.parametrize(

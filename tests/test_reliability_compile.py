@@ -70,8 +70,9 @@ def test_loading_the_cached_kernels_says_nothing(monkeypatch):
 
 def test_a_sigterm_while_compiling_ends_the_wait(monkeypatch):
     """numba compiles inside llvmlite's ctypes callbacks, which swallow the KeyboardInterrupt
-    a signal handler raises there (seen in CI: the sweep ran on after SIGTERM). The stand-in
-    below swallows it the same way; the signal must still end compile_kernels before it ends."""
+    a signal handler raises there (seen in CI: the sweep ran on after SIGTERM). Run in the main
+    thread, as the warm-up was, the stand-in below swallows it the same way; the signal must
+    end compile_kernels before the warm-up ends."""
     import os
     import signal
     import threading

@@ -5,7 +5,7 @@ from __future__ import annotations
 import signal
 import time
 
-from helpers import TIMEOUT, TINY_RUN, cli, finish
+from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish
 
 
 def test_sigterm_ends_the_sweep_with_a_message(tmp_path):
@@ -23,4 +23,27 @@ def test_sigterm_ends_the_sweep_with_a_message(tmp_path):
             proc.wait()
     assert code == 143, output
     assert "vasc_pipeline: terminated (SIGTERM). Finished runs are stored" in output, output
+    assert "Traceback" not in output, output
+
+
+def test_sigterm_while_the_kernels_compile_ends_the_sweep(tmp_path):
+    """On a cold numba cache the sweep first compiles for minutes; SIGTERM then ends it at once
+    (llvmlite's callbacks, in which numba compiles, swallowed the interrupt: the sweep ran on)."""
+    env = {**ENV, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+    proc = cli(*TINY_RUN, f"output_dir={tmp_path / 'out'}", env=env)
+    try:
+        seen = []
+        for line in proc.stderr:  # ends at EOF if the notice never comes
+            seen.append(line)
+            if "compiling the numba kernels" in line:
+                break
+        assert any("compiling the numba kernels" in line for line in seen), "".join(seen)
+        proc.send_signal(signal.SIGTERM)
+        code, output = finish(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == 143, output
+    assert "vasc_pipeline: terminated (SIGTERM)" in output, output
     assert "Traceback" not in output, output

@@ -173,7 +173,7 @@ def test_no_sweep_is_one_job_of_the_base_config():
 @pytest.mark.parametrize(
     "override, field",
     [
-        ("sweep.n_terminals=[16,1]", r"sweep\.n_terminals\[1\] must be an integer >= 2"),
+        ("sweep.n_terminals=[16,1]", r"sweep\.n_terminals\[1\] must be an integer in \[2, 1e\+08\]"),
         ("sweep.m_b=[0.0]", r"sweep\.m_b\[0\] must be a finite number > 0"),
         ("sweep.m_b=[-641.3]", r"sweep\.m_b\[0\] must be a finite number > 0"),
         ("sweep.seeds=[-1]", r"sweep\.seeds\[0\] must be an integer in \[0"),

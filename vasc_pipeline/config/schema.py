@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from .frozen import Settings, freeze, is_frozen, thawed
+from .frozen import Settings, _freeze, is_frozen, thawed
 from .pipeline import ClusterConfig, SlurmConfig, SweepConfig, TLSConfig
 
 __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-exported: public API)
@@ -37,6 +37,7 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "TLSConfig",
     "SlurmConfig",
     "to_run_config",
+    "from_stored",
     "validate",
     "Rule",
     "SWEPT_KEYS",
@@ -56,6 +57,7 @@ HEART_EXCLUSION_VOXEL_SIZE = 1.1533753893850243e-3  # m: R_supply / 4 of the hea
 # Upper bounds, so that a typo'd exponent is refused here rather than overflowing after dispatch
 # (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
 MAX_STEPS = 10**15
+MAX_TERMINALS = 10**8  # organ scale is 1e5-1e6 vessels; beyond, no grid or tree would fit in memory
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
 MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: the map no longer resolves the tissue
@@ -131,8 +133,9 @@ class TissueConfig(Settings):
     voxel_size: Optional[float] = None  # m; None: R_supply / 4 (~270 voxels per supply sphere)
     # The grid the exclusion term is summed on, m, fixed whatever N (its D and L are in its
     # voxels); None: the supply grid above (whose voxel follows N unless voxel_size is set).
-    # The heart's, the default tissue: its supply voxel at N = 500; the other tissues set None.
-    exclusion_voxel_size: Optional[float] = HEART_EXCLUSION_VOXEL_SIZE
+    # conf/tissue/heart.yaml sets HEART_EXCLUSION_VOXEL_SIZE; None here, as the other tissues
+    # (a shape built in code has no N-independent edge that suits it)
+    exclusion_voxel_size: Optional[float] = None
     q_required: Optional[float] = None  # s^-1; None: the N supply spheres fill the tissue
     radius: float = 0.02  # sphere radius, m
     size: list[float] = field(default_factory=lambda: [0.04, 0.04, 0.02])  # box edges [x, y, z], m
@@ -273,7 +276,7 @@ def to_run_config(cfg: Any) -> RunConfig:
         return cfg
     from omegaconf import OmegaConf
 
-    container = OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else dict(cfg)
+    container = OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else _plain(dict(cfg))
     known = set(RunConfig.__dataclass_fields__)
     schema = OmegaConf.structured(RunConfig)
     try:
@@ -281,6 +284,30 @@ def to_run_config(cfg: Any) -> RunConfig:
     except Exception as exc:  # omegaconf's message names the key and the type it wanted
         raise ConfigError(f"invalid configuration: {exc}") from exc
     return OmegaConf.to_object(merged)
+
+
+def _plain(value: Any) -> Any:
+    """Nested dicts and lists as plain ones (OmegaConf refuses a list subclass: ReadOnlyList)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def from_stored(stored: Any) -> RunConfig:
+    """The :class:`RunConfig` of a run store's config (its ``config`` attribute): the keys it
+    lacks, added to the schema after it was written, at the values that reproduce what the
+    code did before them (:data:`KEYS_ADDED_LATER`), not at today's defaults."""
+    stored = _plain(dict(stored))  # a copy, of plain types
+    for dotted, neutral in KEYS_ADDED_LATER.items():
+        *path, key = dotted.split(".")
+        node = stored
+        for part in path:
+            node = node.get(part) if isinstance(node, dict) else None
+        if isinstance(node, dict) and key not in node:
+            node[key] = neutral
+    return to_run_config(stored)
 
 
 def _positive(name: str, value: float) -> None:
@@ -303,10 +330,17 @@ class Rule:
 
     def check(self, name: str, value: Any) -> Any:
         """``value`` as ``kind``; a :class:`ConfigError` naming ``name`` when it is not accepted."""
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if number and self.kind is int:
-            number = float(value).is_integer()
-        if not number or not self.ok(self.kind(value)):
+        if self.kind is int:  # an int, or a float that is one (1e5); never a bool
+            number = (isinstance(value, int) and not isinstance(value, bool)) or (
+                isinstance(value, float) and value.is_integer()
+            )
+        else:
+            number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        try:
+            ok = number and self.ok(self.kind(value))
+        except OverflowError:  # an integer beyond the float range
+            ok = False
+        if not ok:
             raise ConfigError(f"{name} must be {self.accepted}, got {value!r}")
         return self.kind(value)
 
@@ -314,7 +348,7 @@ class Rule:
 # The keys a sweep can scan: one rule each, for the key (n_terminals, physics.m_b, seed,
 # anneal.steps) and for its axis (sweep.n_terminals, sweep.m_b, sweep.seeds, sweep.steps).
 SWEPT_KEYS = {
-    "n_terminals": Rule(int, lambda v: v >= 2, "an integer >= 2"),
+    "n_terminals": Rule(int, lambda v: 2 <= v <= MAX_TERMINALS, f"an integer in [2, {MAX_TERMINALS:.0e}]"),
     "m_b": Rule(float, lambda v: v > 0 and math.isfinite(v), "a finite number > 0"),
     "seeds": Rule(int, seed_ok, SEED_ACCEPTED),
     "steps": Rule(int, lambda v: 1 <= v <= MAX_STEPS, f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)"),
@@ -555,7 +589,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _validate_method(cfg)
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
-    return freeze(cfg)
+    return _freeze(cfg)
 
 
 def _check_labels(labels: LabelsConfig) -> None:

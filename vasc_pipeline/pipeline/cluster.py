@@ -23,6 +23,7 @@ from typing import Any, Iterator
 
 from ..config.pipeline import ClusterConfig
 from ..config.schema import ConfigError
+from ..store.layout import SLURM_LOG_DIR
 
 __all__ = [
     "check_cluster",
@@ -73,20 +74,19 @@ def _cores() -> int:
 
 def check_cluster(cluster: ClusterConfig) -> None:
     """Raise ConfigError naming the ``cluster.*`` field that is out of range."""
-    if cluster.address == "???":  # cluster=address without cluster.address (a missing value)
-        cluster.address = None
+    address = None if cluster.address == "???" else cluster.address  # cluster=address without one: missing
     if cluster.name not in ("local", "address", "slurm"):
         raise ConfigError(f"cluster.name must be one of local, address, slurm; got {cluster.name!r}")
     if cluster.n_workers is not None and cluster.n_workers < 1:
         raise ConfigError(f"cluster.n_workers must be an integer >= 1 (or null: one per core), got {cluster.n_workers}")
     if cluster.retries < 0:
         raise ConfigError(f"cluster.retries must be an integer >= 0, got {cluster.retries}")
-    if cluster.name == "address" and not cluster.address:
+    if cluster.name == "address" and not address:
         raise ConfigError(
             "cluster.address is required for cluster=address: the scheduler's tcp://host:8786 (or tls://host:8786)"
         )
-    if cluster.address and "://" not in cluster.address:
-        raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {cluster.address!r}")
+    if address and "://" not in address:
+        raise ConfigError(f"cluster.address must look like tcp://host:8786 or tls://host:8786, got {address!r}")
     if cluster.name == "slurm":
         _check_slurm_resources(cluster.slurm)
     if not (cluster.startup_timeout > 0 and math.isfinite(cluster.startup_timeout)):
@@ -341,7 +341,8 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
         memory=s.memory,
         interface=s.interface,
         local_directory=s.local_directory,
-        log_directory=s.log_directory,
+        # unset: with the sweep's results, not as slurm-<id>.out in whatever directory it was started from
+        log_directory=s.log_directory or (str(Path(output_dir).resolve() / SLURM_LOG_DIR) if output_dir else None),
         job_extra_directives=list(s.job_extra_directives),
         job_script_prologue=[*s.job_script_prologue, *_WORKER_ENV],
         security=security,
@@ -355,13 +356,19 @@ def slurm_cluster(cluster: ClusterConfig, output_dir: str | os.PathLike | None =
 
 
 def slurm_job_script(cluster: ClusterConfig, output_dir: str | os.PathLike) -> str:
-    """The job script SLURM would run for ``cluster`` (nothing submitted; the cluster's scheduler is closed again)."""
+    """The job script SLURM would run for ``cluster`` (nothing submitted; the cluster's scheduler
+    is closed again, and the log directory dask-jobqueue creates is removed if it was not there)."""
+    logs = Path(output_dir).resolve() / SLURM_LOG_DIR
+    created = [d for d in (logs.parent, logs) if not d.exists()]
     with _quiet_dask():
         cl = slurm_cluster(cluster, output_dir)
         try:
             return cl.job_script()
         finally:
             cl.close()
+            for d in reversed(created):
+                with contextlib.suppress(OSError):  # not empty: something else wrote there
+                    d.rmdir()
 
 
 @contextlib.contextmanager
@@ -423,7 +430,8 @@ def wait_for_workers(client: Any, cluster: ClusterConfig, n_jobs: int) -> None:
     if cluster.name == "slurm":
         what = (
             f"the workers of {cluster.n_workers or n_jobs} requested SLURM worker(s) (squeue -u $USER shows "
-            "whether the jobs are queued; their logs go to cluster.slurm.log_directory)"
+            f"whether the jobs are queued; their logs go to cluster.slurm.log_directory, by default "
+            f"<output_dir>/{SLURM_LOG_DIR})"
         )
     elif cluster.address:
         what = (

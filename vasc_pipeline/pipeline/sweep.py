@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config.identity import INPUTS, input_digests
-from ..config.schema import ConfigError, RunConfig, sweep_axis, to_run_config, validate
+from ..config.schema import ConfigError, RunConfig, from_stored, sweep_axis, to_run_config, validate
 from ..model.tissue.shapes import mask_geometry
 from ..store.layout import cell_id, run_id, run_path
 
@@ -55,9 +55,15 @@ class Job:
     store: str = ""
     validated: RunConfig | None = field(default=None, hash=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        if self.validated is not None and stored_config(self.validated) != {
+            k: v for k, v in self.config.items() if k != INPUTS
+        }:
+            raise ValueError(f"job {self.run_id}: its validated config is not the config it stores")
+
     def run_config(self) -> RunConfig:
         """The run's validated config (validated here for a job built without one)."""
-        return self.validated if self.validated is not None else validate(to_run_config(self.config))
+        return self.validated if self.validated is not None else validate(from_stored(self.config))
 
 
 def stored_config(run_cfg: RunConfig) -> dict:

@@ -24,6 +24,7 @@ from typing import Any, Mapping
 __all__ = [
     "LOCK_NAME",
     "RUNS_DIR",
+    "SLURM_LOG_DIR",
     "SUMMARY_NAME",
     "COMPARISON_CSV",
     "COMPARISON_SUMMARY_CSV",
@@ -37,6 +38,7 @@ __all__ = [
 ]
 
 LOCK_NAME = ".vasc_pipeline.lock"
+SLURM_LOG_DIR = ".slurm_logs"  # cluster=slurm: the worker jobs' logs (unless cluster.slurm.log_directory)
 RUNS_DIR = "runs"
 SUMMARY_NAME = "summary.zarr"
 COMPARISON_CSV = "comparison.csv"

@@ -35,7 +35,7 @@ for part in "${PARTS[@]}"; do
     a) grid=(--label "exclusion grid a, supply grid" --override tissue.exclusion_voxel_size=null) ;;
     b) grid=(--label "exclusion grid b, 1.153 mm" --override tissue.exclusion_voxel_size=$VOXEL_500) ;;
     bp) grid=(--label "exclusion grid b-prime, 0.504 mm" --override tissue.exclusion_voxel_size=$VOXEL_6000) ;;
-    c) grid=(--label "exclusion grid c, both 0.504 mm" --override tissue.voxel_size=$VOXEL_6000) ;;
+    c) grid=(--label "exclusion grid c, both 0.504 mm" --override tissue.voxel_size=$VOXEL_6000 --override tissue.exclusion_voxel_size=null) ;;
     *) echo "VARIANT must be a, b, bp or c, got '$variant'" >&2; exit 2 ;;
   esac
   if [ "${part#*:}" = large ] && [ "$variant" != a ] && [ "$variant" != b ]; then
