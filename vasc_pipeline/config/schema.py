@@ -97,6 +97,9 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.cold_share": None,
     "anneal.coarse_exclusion_factor": None,
     "anneal.coarse_exclusion_phase": None,
+    "anneal.parts": 1,
+    "anneal.part_phases": 64,
+    "anneal.part_share": 0.9,
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
@@ -224,7 +227,13 @@ class AnnealConfig(Settings):
     adapt_window: int = 1000  # proposals of a class between adaptations
     polish: bool = True  # optimise the final topology's bifurcation positions (engine.polish)
     polish_swaps_max_terminals: int = 8  # with polish, up to this N: single-swap descent (engine.polish.descend_swaps)
-    trace_every: int = 100_000  # steps between trace records
+    trace_every: int = 100_000  # steps between trace records (with parts > 1: one record a phase)
+    # One tree on several workers (engine.parts): the tree anneal in part_phases phases, each
+    # part_share of its proposals in `parts` independent parts of the tree (run by the cluster's
+    # workers), the rest on the whole tree; parts = 1: the serial anneal
+    parts: int = 1
+    part_phases: int = 64
+    part_share: float = 0.9
     init: str = "random"  # initial tree: "random" (the paper's) or "cco" (vasc_pipeline.engine.cco, method.* settings)
 
 
@@ -514,6 +523,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         for name in ("cold_from", "cold_share"):
             if not 0.0 < getattr(a, name) < 1.0:
                 raise ConfigError(f"anneal.{name} must lie in (0, 1), got {getattr(a, name)}")
+    _check_parts(cfg)
     if (a.coarse_exclusion_factor is None) != (a.coarse_exclusion_phase is None):
         raise ConfigError(
             "anneal.coarse_exclusion_factor and anneal.coarse_exclusion_phase are set together (both null: the "
@@ -590,6 +600,26 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
     return _freeze(cfg)
+
+
+def _check_parts(cfg: RunConfig) -> None:
+    a = cfg.anneal
+    if not isinstance(a.parts, int) or not 1 <= a.parts <= max(1, cfg.n_terminals // 16):
+        raise ConfigError(
+            f"anneal.parts must be an integer in [1, n_terminals / 16 = {max(1, cfg.n_terminals // 16)}] (parts of at "
+            f"least 16 terminals), got {a.parts}"
+        )
+    if not isinstance(a.part_phases, int) or not 1 <= a.part_phases <= 100_000:
+        raise ConfigError(f"anneal.part_phases must be an integer in [1, 100000], got {a.part_phases}")
+    if not 0.0 < a.part_share < 1.0:
+        raise ConfigError(f"anneal.part_share must lie in (0, 1), got {a.part_share}")
+    if a.parts > 1 and cfg.physics.A_p != 0:
+        raise ConfigError(
+            f"anneal.parts={a.parts} needs physics.A_p = 0: the terminal-pressure term couples every segment of "
+            "the tree, so parts could not be annealed apart"
+        )
+    if a.parts > 1 and cfg.method.name != "anneal":
+        raise ConfigError(f"anneal.parts={a.parts} applies to method=anneal only, got method={cfg.method.name}")
 
 
 def _check_labels(labels: LabelsConfig) -> None:

@@ -362,9 +362,12 @@ def state_arrays(state: kernel.State) -> dict[str, np.ndarray]:
     return {name: getattr(state, name).copy() for name in CHECKPOINT_FIELDS}
 
 
-def restore_state(problem: Problem, arrays: dict[str, np.ndarray]) -> kernel.State:
-    """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed."""
-    n = problem.physics.n_terminals
+def restore_state(problem: Problem, arrays: dict[str, np.ndarray], n_terminals: int | None = None) -> kernel.State:
+    """A kernel state from checkpointed arrays; bit-identical continuation is guaranteed.
+
+    ``n_terminals``: of a part of the tree (:mod:`vasc_pipeline.engine.parts`); default the tree's.
+    """
+    n = problem.physics.n_terminals if n_terminals is None else int(n_terminals)
     m = 2 * n
     dtypes = {name: _STATE_INT64.get(name, np.float64) for name in CHECKPOINT_FIELDS}
     dtypes["supply"] = supply_dtype(n)

@@ -24,6 +24,7 @@ from ..kernel import packing
 from ..model.costs import COST_TERMS, full_costs, vascular_cost
 from ..model.tree import Tree
 from ..store.run_store import TRACE_FIELDS
+from .parts import phase_ends, run_phase
 from .polish import descend_swaps, polish
 from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
 
@@ -112,18 +113,29 @@ def accepted_moves(state: kernel.State) -> int:
     )
 
 
-def anneal_blocks(problem: Problem, state: kernel.State, trace: Trace, block: int) -> Iterator[int]:
+def anneal_blocks(
+    problem: Problem, state: kernel.State, trace: Trace, block: int, part_map: Callable = map
+) -> Iterator[int]:
     """Anneal ``state`` to the end of the schedule in blocks, recording one trace row per block.
 
     Blocks end on multiples of ``block`` (a resumed state starts on one), so a resumed run
     has exactly the trace of an uninterrupted one. Yields the step count after every block
-    (the caller reports progress or checkpoints there).
+    (the caller reports progress or checkpoints there). With ``anneal.parts`` > 1 the tree
+    anneal's blocks are its phases (:func:`vasc_pipeline.engine.parts.run_phase`), whose parts
+    ``part_map`` runs (any order-preserving map: the builtin, a pool's, a cluster's).
     """
     total = problem.total_steps
+    ends = phase_ends(problem) if problem.config.anneal.parts > 1 else None
     while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
-        n = min(block - step % block, total - step)
         before = accepted_moves(state)
-        run_block(problem, state, n)
+        if ends is not None and step >= problem.model.pack_steps:
+            n = int(ends[np.searchsorted(ends, step, side="right")]) - step
+            run_phase(problem, state, n, part_map)
+        else:
+            n = min(block - step % block, total - step)
+            if ends is not None:  # the packing phase's last block ends where the phases begin
+                n = min(n, int(problem.model.pack_steps) - step)
+            run_block(problem, state, n)
         trace.record(problem, state, n, accepted_moves(state) - before)
         yield step + n
 
@@ -168,12 +180,14 @@ def run(
     *,
     block_steps: int | None = None,
     progress: Callable[[int, int, dict], None] | None = None,
+    part_map: Callable = map,
 ) -> RunResult:
     """Grow one tree from (config, seed) and return it with running and recomputed costs.
 
     ``seed`` defaults to ``config.seed``. ``block_steps`` (default ``anneal.trace_every``)
     sets the trace resolution; it does not change the result. ``progress(step, total,
-    costs)`` is called after every block.
+    costs)`` is called after every block. ``part_map`` runs the parts of an ``anneal.parts`` > 1
+    anneal (:func:`anneal_blocks`); it does not change the result.
     """
     start = time.perf_counter()
     problem = build_problem(config)
@@ -182,7 +196,7 @@ def run(
     block = int(block_steps or problem.config.anneal.trace_every)
     trace = Trace()
     trace.record(problem, state, 0, 0)
-    for step in anneal_blocks(problem, state, trace, block):
+    for step in anneal_blocks(problem, state, trace, block, part_map):
         if progress is not None:
             progress(step, problem.total_steps, running_costs(problem, state))
     report = finish(problem, state)

@@ -23,6 +23,7 @@ from .supply import supply_sphere
 __all__ = [
     "anneal_block",
     "initialise",
+    "initialise_segments",
     "sample_uphill",
     "scaled_total_without_supply",
 ]
@@ -31,18 +32,32 @@ __all__ = [
 @jit  # once per run; np.count_nonzero needs the reference-counted runtime
 def initialise(model, state):
     """Fill the per-segment caches, the supply map and the running sums from the tree."""
-    tables = model.tables
-    pos = state.position
-    state.costs[:] = 0.0
-    state.compensation[:] = 0.0
-    state.seg_length[:] = 0.0
+    initialise_segments(model, state)
     supply = state.supply
-    state.scratch_shell_frame[:, 3] = 0.0  # no shell of a grid this model may not share
     nz, ny, nx = supply.shape
     for k in range(nz):
         for j in range(ny):
             for i in range(nx):
                 supply[k, j, i] = 0 if model.mask[k, j, i] != 0 else -1
+    if model.supply_on:
+        c_s = 10.0 * np.count_nonzero(model.mask)
+        for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
+            c_s += supply_sphere(model, supply, state.position[t], 1)
+        state.costs[SUPPLY] = c_s
+    if model.pressure_on:
+        state.costs[PRESSURE] = pressure_cost(model, state)
+
+
+@jit
+def initialise_segments(model, state):
+    """:func:`initialise` but for the supply map, left as it is, and C_s and C_p, left at 0
+    (a part of a tree takes its supply map and C_s from the whole tree: engine.parts)."""
+    tables = model.tables
+    pos = state.position
+    state.costs[:] = 0.0
+    state.compensation[:] = 0.0
+    state.seg_length[:] = 0.0
+    state.scratch_shell_frame[:, 3] = 0.0  # no shell of a grid this model may not share
     for i in range(model.n_inlets, state.parent.size):
         p = state.parent[i]
         n = state.n_downstream[i]
@@ -51,13 +66,6 @@ def initialise(model, state):
         _add(state.costs, state.compensation, VOLUME, tables[TABLE_VOLUME, n] * length)
         _add(state.costs, state.compensation, POWER, tables[TABLE_POWER, n] * length)
     recompute_exclusion(model, state)
-    if model.supply_on:
-        c_s = 10.0 * np.count_nonzero(model.mask)
-        for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
-            c_s += supply_sphere(model, supply, pos[t], 1)
-        state.costs[SUPPLY] = c_s
-    if model.pressure_on:
-        state.costs[PRESSURE] = pressure_cost(model, state)
     build_cells(model, state)
 
 
