@@ -90,7 +90,7 @@ def _summary(
     }
 
 
-def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
+def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) -> dict[str, Any]:
     """Run (or resume, or skip) one job and return a small summary dict.
 
     Parameters
@@ -100,6 +100,9 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
     report : callable, optional
         Called after every block with ``{"run_id", "cell", "step", "total_steps", "cost"}``
         (``cost`` the annealed total, W-scaled): the orchestrator's progress line.
+    part_map : callable, default map
+        Runs the parts of an ``anneal.parts`` > 1 anneal (the orchestrator's: on the cluster's
+        workers); it does not change the result.
 
     Returns
     -------
@@ -153,7 +156,7 @@ def run_job(job: Job, report: Reporter | None = None) -> dict[str, Any]:
         def wall() -> float:
             return wall_before + (time.perf_counter() - started)
 
-        for step in engine.anneal_blocks(problem, state, trace, block):
+        for step in engine.anneal_blocks(problem, state, trace, block, part_map):
             if report is not None:
                 report(
                     {

@@ -182,7 +182,13 @@ def _dask_run_job(job: Job) -> dict:
             worker.log_event(PROGRESS_TOPIC, msg)
 
     try:
-        return run_job(job, report)
+        if job.run_config().anneal.parts == 1:
+            return run_job(job, report)
+        from distributed import worker_client
+
+        # Seceded while it waits, so that this worker's slot takes parts too; results in part order.
+        with worker_client() as client:
+            return run_job(job, report, lambda f, jobs: client.gather(client.map(f, list(jobs), pure=False)))
     except (OSError, MemoryError):
         raise  # the machine's (filesystem, memory, a store lock): Dask retries, the job resumes
     except Exception as exc:
