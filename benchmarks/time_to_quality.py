@@ -27,6 +27,7 @@ Then a table of mean ± SE per (N, schedule, budget). A variant of a preset
     python benchmarks/time_to_quality.py --out results/ttq --anneal fast_v1 --budgets 1 3
     python benchmarks/time_to_quality.py --out results/ttq --anneal fast --label pack \
         --override anneal.packing_steps_per_terminal=10000 --override anneal.supply_T_start=null
+    python benchmarks/time_to_quality.py --out results/ttq --anneal fast --parts 2 --workers 2  # one tree in 2 parts
     python benchmarks/time_to_quality.py --quick                           # seconds: wiring only
 
 Wall times are those of one core; two runs side by side on a 2-core machine share its
@@ -81,6 +82,18 @@ def run_one(j) -> str:
     from vasc_pipeline import job
 
     job.run_job(j)
+    return j.store
+
+
+def run_in_parts(j, workers: int) -> str:
+    """One run of ``anneal.parts`` > 1, its parts on ``workers`` threads (the kernel releases the
+    GIL; the tree is the one any other way of running the parts gives)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from vasc_pipeline import job
+
+    with ThreadPoolExecutor(workers) as pool:
+        job.run_job(j, part_map=pool.map)
     return j.store
 
 
@@ -218,7 +231,15 @@ def main(argv: list[str] | None = None) -> list[dict]:
     )
     parser.add_argument("--steps", type=int, help="exact moves per run instead of --budgets")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default: 0)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count(), help="runs side by side (one core each)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count(),
+        help="runs side by side (one core each); with --parts, the threads that run one tree's parts",
+    )
+    parser.add_argument(
+        "--parts", type=int, default=1, help="anneal.parts: one tree in this many parts (default 1: serial)"
+    )
     parser.add_argument("--out", type=Path, help="directory of the run stores and rows.jsonl")
     parser.add_argument("--override", action="append", default=[], help="extra config override, e.g. m_b=6413")
     parser.add_argument(
@@ -230,6 +251,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     args = parser.parse_args(argv)
     if args.label and len(args.anneal) > 1:
         parser.error("--label names one variant: give one --anneal preset with it")
+    if args.parts > 1:  # one tree at a time, its parts on the workers
+        args.override = [*args.override, f"anneal.parts={args.parts}"]
+        if args.label is None and len(args.anneal) == 1:
+            args.label = f"{args.anneal[0]}-parts{args.parts}"
+        elif args.label is None:
+            parser.error("--parts with several --anneal presets needs runs of one preset (or a --label)")
     sizes = args.sizes or DEFAULT_SIZES
     if args.large:
         sizes = sorted(set(sizes) | set(LARGE_SIZES))
@@ -256,14 +283,22 @@ def main(argv: list[str] | None = None) -> list[dict]:
     todo = [w for w in wanted if w[0].store not in done]
     todo.sort(key=lambda w: -w[0].config["anneal"]["steps"])  # longest first: the pool finishes together
     by_store = {w[0].store: w for w in todo}
-    with ProcessPoolExecutor(args.workers) as pool:
-        for store in pool.map(run_one, [w[0] for w in todo]):
+    if args.parts > 1:
+        finished = (run_in_parts(w[0], args.workers) for w in todo)
+    else:
+        pool = ProcessPoolExecutor(args.workers)
+        finished = pool.map(run_one, [w[0] for w in todo])
+    try:
+        for store in finished:
             _, schedule, budget = by_store[store]
             row = row_of(store, schedule, budget)
             done[store] = row
             print(json.dumps(row), flush=True)
             with rows_file.open("a") as f:
                 f.write(json.dumps(row) + "\n")
+    finally:
+        if args.parts == 1:
+            pool.shutdown()
     rows = [done[w[0].store] for w in wanted]
     table = summarise(rows)
     print_table(table)

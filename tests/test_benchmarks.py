@@ -65,6 +65,21 @@ def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
     assert job.config["anneal"]["p_swap"] == 0.7  # not the default (0.3)
 
 
+def test_time_to_quality_runs_one_tree_in_parts(tmp_path):
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS[0].parent / "time_to_quality.py"), "--quick", "--anneal", "fast"]
+        + ["--parts", "2", "--workers", "2", "--out", str(tmp_path)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    (row,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert row["anneal"] == "fast-parts2" and row["steps"] == 20_000
+    assert (tmp_path / "fast-parts2" / "x1" / "runs").is_dir()
+
+
 def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):
     coarse = ["--override", "anneal.coarse_exclusion_factor=2", "--override", "anneal.coarse_exclusion_phase=0.5"]
     done = subprocess.run(

@@ -84,17 +84,19 @@ def _subtree_terminals(children: np.ndarray, root: int) -> list[int]:
     return out
 
 
-def cut(parent, children, n_downstream, position, n_inlets: int, k: int, shift: np.ndarray) -> list[np.ndarray]:
+def cut(
+    parent, children, n_downstream, position, n_inlets: int, k: int, shift: np.ndarray, leaves: bool = False
+) -> list[np.ndarray]:
     """The roots of whole subtrees grouped into ``k`` parts of about N/k terminals each.
 
     The largest subtree is split into its two children until none holds more than N/(4k)
     terminals; the subtrees are then ordered along a Morton curve of their terminals' centroid
-    (on a grid shifted by ``shift``, a fraction of the grid's cell per axis, so that the cut
+    (the cloud placed at ``shift`` in [0, 1)^3 within a grid twice its size, so that the cut
     moves from phase to phase) and the curve is cut into ``k`` runs of about N/k terminals.
     Returns one int64 array of roots per part, in curve order.
     """
     n_terminals = int(sum(n_downstream[children[i, 0]] for i in range(n_inlets)))
-    limit = max(1, n_terminals // (4 * k))
+    limit = 1 if leaves else max(1, n_terminals // (4 * k))
     roots = [int(children[i, 0]) for i in range(n_inlets)]
     final = []
     while roots:
@@ -106,7 +108,8 @@ def cut(parent, children, n_downstream, position, n_inlets: int, k: int, shift: 
     centroids = np.array([position[_subtree_terminals(children, r)].mean(axis=0) for r in final])
     lo, hi = centroids.min(axis=0), centroids.max(axis=0)
     cells = 1024
-    grid = np.floor(((centroids - lo) / np.maximum(hi - lo, 1e-300) + shift) * (cells - 1)).astype(np.int64) % cells
+    # the cloud fills half of each axis of the curve's grid, placed at ``shift`` along it
+    grid = np.floor(((centroids - lo) / np.maximum(hi - lo, 1e-300) + shift) * (cells / 2 - 1)).astype(np.int64)
     keys = np.zeros(len(final), dtype=np.int64)
     for bit in range(10):
         for axis in range(3):
@@ -119,31 +122,31 @@ def cut(parent, children, n_downstream, position, n_inlets: int, k: int, shift: 
 
 def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part: np.ndarray, k: int) -> np.ndarray:
     """uint8 (k, nz, ny, nx): per part, the supply-grid voxels where a terminal's supply sphere
-    lies wholly in the part's region (the voxels whose nearest terminal is the part's) and
-    which are tissue.
+    lies wholly in the part's region (the tissue voxels whose nearest terminal is the part's,
+    and the voxels outside the tissue, whose counts no sphere changes) and which are tissue.
 
     A terminal at x covers the voxel centres within ρ (the supply radius, voxels) of x, and x
     lies within √3/2 of its voxel's centre; so a voxel more than ρ + 1 from every voxel of
     other regions is safe.
     """
     t = problem.tissue
-    shape = t.shape
-    centres = np.stack(np.meshgrid(*(np.arange(s) for s in shape), indexing="ij"), axis=-1).reshape(-1, 3)
-    xyz = t.origin + t.voxel_size * centres[:, ::-1]  # (z, y, x) indices -> [x, y, z] m
-    _, nearest = cKDTree(terminal_position).query(xyz)
-    region = terminal_part[nearest].reshape(shape)
+    tissue = t.mask != 0
+    centres = np.argwhere(tissue)  # (z, y, x) indices
+    _, nearest = cKDTree(terminal_position).query(t.origin + t.voxel_size * centres[:, ::-1])
+    region = np.full(t.shape, -1, dtype=np.int64)  # -1: not tissue, no count to share
+    region[tissue] = terminal_part[nearest]
     reach = problem.model.supply_rho + 1.0
-    out = np.zeros((k, *shape), dtype=np.uint8)
+    out = np.zeros((k, *t.shape), dtype=np.uint8)
     for p in range(k):
-        inside = ndimage.distance_transform_edt(region == p) > reach
-        out[p] = inside & (t.mask != 0)
+        out[p] = (ndimage.distance_transform_edt((region == p) | ~tissue) > reach) & tissue
     return out
 
 
-def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray) -> list[Part]:
-    """The phase's ``k`` parts of the tree in ``state`` (:func:`cut`, :func:`part_regions`)."""
+def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray, leaves: bool = False) -> list[Part]:
+    """The phase's ``k`` parts of the tree in ``state`` (:func:`cut`, :func:`part_regions`);
+    ``leaves``: parts of terminals alone, grouped by position, each hanging from its parent."""
     model = problem.model
-    roots = cut(state.parent, state.children, state.n_downstream, state.position, model.n_inlets, k, shift)
+    roots = cut(state.parent, state.children, state.n_downstream, state.position, model.n_inlets, k, shift, leaves)
     first_terminal = model.n_inlets
     first_bifurcation = model.n_inlets + model.n_terminals
     terminal_part = np.full(model.n_terminals, -1, dtype=np.int64)
@@ -268,6 +271,11 @@ def merge_parts(model: kernel.Model, state: kernel.State, parts: list[Part], res
         kids = sub.children[part.n_inlets :]
         state.children[own] = np.where(kids >= 0, part.nodes[np.maximum(kids, 0)], -1)
         state.n_downstream[own] = sub.n_downstream[part.n_inlets :]
+        # A swap may have hung another of the part's subtrees from a pseudo-inlet: the parents
+        # outside the part take the children their pseudo-inlets ended with, slot by slot.
+        now = dict(zip(part.roots.tolist(), part.nodes[sub.children[: part.n_inlets, 0]].tolist()))
+        for g in np.unique(part.nodes[: part.n_inlets]):
+            state.children[g] = [now.get(c, c) for c in state.children[g]]
         counters[_SUMMED_COUNTERS] += sub.counters[_SUMMED_COUNTERS] - state.counters[_SUMMED_COUNTERS]
         counters[kernel.COUNTER_STEP] += int(sub.counters[kernel.COUNTER_STEP]) - step0
         step_size += part.nodes.size * sub.step_size
@@ -289,20 +297,24 @@ def phase_ends(problem: Problem) -> np.ndarray:
 
 
 def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable = map) -> None:
-    """One phase of ``n_steps`` proposals from the state's step on, in place: a new cut (its
-    shift and the parts' seeds drawn from the whole tree's generator), ``anneal.part_share``
-    of the proposals in the parts (``map`` runs them), the merge, then the rest on the whole
-    tree (:func:`vasc_pipeline.engine.run_block`)."""
+    """One phase of ``n_steps`` proposals from the state's step on, in place: ``anneal.part_share``
+    of them in parts, half in parts of whole subtrees (where a swap or a bifurcation may move;
+    their terminals are mostly border terminals, a subtree's territory being rarely compact),
+    half in parts of terminals grouped by place, each hanging from its fixed parent (where
+    terminals move and trade parents); each cut's shift and its parts' seeds drawn from the
+    whole tree's generator, ``map`` running the parts; then the rest on the whole tree
+    (:func:`vasc_pipeline.engine.run_block`)."""
     from .run import run_block
 
     a = problem.config.anneal
     step = int(state.counters[kernel.COUNTER_STEP])
     model = problem.coarse_model if step < problem.coarse_steps else problem.model
-    shift = np.array([next_double(state.rng) for _ in range(3)])
-    phase_seed = int(next_double(state.rng) * 2.0**53)
-    parts = make_parts(problem, state, a.parts, shift)
-    results = anneal_parts(problem, model, state, parts, int(n_steps * a.part_share), phase_seed, map)
-    merge_parts(model, state, parts, results)
+    for leaves in (False, True):  # subtrees (their bifurcations and topology), then terminals by place
+        shift = np.array([next_double(state.rng) for _ in range(3)])
+        phase_seed = int(next_double(state.rng) * 2.0**53)
+        parts = make_parts(problem, state, a.parts, shift, leaves)
+        results = anneal_parts(problem, model, state, parts, int(n_steps * a.part_share) // 2, phase_seed, map)
+        merge_parts(model, state, parts, results)
     rest = step + int(n_steps) - int(state.counters[kernel.COUNTER_STEP])
     if rest > 0:
         run_block(problem, state, rest)

@@ -23,6 +23,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from .. import engine, kernel
+from ..engine.parts import phase_ends
 from ..model.costs import full_costs
 from ..store.run_store import STATUS_COMPLETE, CheckpointWarning, RunStore, is_empty_leftover, run_lock
 from .sweep import Job
@@ -156,17 +157,20 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
         def wall() -> float:
             return wall_before + (time.perf_counter() - started)
 
+        parts = int(problem.config.anneal.parts)
+        ends = phase_ends(problem) if parts > 1 else None
         for step in engine.anneal_blocks(problem, state, trace, block, part_map):
             if report is not None:
-                report(
-                    {
-                        "run_id": job.run_id,
-                        "cell": job.cell,
-                        "step": step,
-                        "total_steps": total,
-                        "cost": float(trace.rows[-1][-2]),
-                    }
-                )
+                msg = {
+                    "run_id": job.run_id,
+                    "cell": job.cell,
+                    "step": step,
+                    "total_steps": total,
+                    "cost": float(trace.rows[-1][-2]),
+                }
+                if ends is not None:  # phases done, phases, parts
+                    msg["phase"] = [int(np.searchsorted(ends, step, side="right")), len(ends), parts]
+                report(msg)
             if time.perf_counter() - last_checkpoint >= every and step < total:
                 trace_length = store.append_trace(trace.arrays(), trace_length)
                 trace.rows.clear()  # the same Trace: anneal_blocks records into it

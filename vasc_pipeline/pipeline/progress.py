@@ -51,6 +51,7 @@ class Progress:
         }
         self.steps_at_start = sum(self.steps.values())
         self.best: dict[str, float] = {}
+        self.phases: dict[str, tuple[int, int, int]] = {}  # run_id -> (phases done, phases, parts): anneal.parts > 1
         self.done = len(p.complete)
         self.stream = stream
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
@@ -78,11 +79,14 @@ class Progress:
             elif msg.get("run_id") in self.steps:
                 self.steps[msg["run_id"]] = int(msg["step"])
                 self._cost(msg["run_id"], msg.get("cost"))
+                if msg.get("phase"):
+                    self.phases[msg["run_id"]] = tuple(msg["phase"])
 
     def finished(self, summary: dict) -> None:
         with self.lock:
             self.done += 1
             self.steps[summary["run_id"]] = self.totals[summary["run_id"]]
+            self.phases.pop(summary["run_id"], None)
             self._cost(summary["run_id"], summary.get("cost"))
         how = f"resumed from step {summary['resumed_from']}" if summary["resumed_from"] else "from step 0"
         if summary["status"] == "skipped":
@@ -105,10 +109,11 @@ class Progress:
             remaining = sum(self.totals.values()) - done_steps
             best = ", ".join(f"{c} {v:.4g}" for c, v in sorted(self.best.items()))
             done = self.done
+            phases = ", ".join(f"{r} phase {i}/{n} in {k} parts" for r, (i, n, k) in sorted(self.phases.items()))
         eta = remaining / rate if rate > 0 else math.inf
         return (
             f"runs {done}/{self.total_runs} | {rate:.3g} steps/s | ETA {_duration(eta)} | "
-            f"best cost per cell: {best or '-'}"
+            f"best cost per cell: {best or '-'}" + (f" | {phases}" if phases else "")
         )
 
     def tick(self, force: bool = False) -> None:
