@@ -15,10 +15,12 @@ import json
 import math
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Optional
 
+from .errors import ConfigError
 from .frozen import Settings, _freeze, is_frozen, thawed
 from .pipeline import ClusterConfig, SlurmConfig, SweepConfig, TLSConfig
+from .rules import MAX_STEPS, SWEPT_KEYS, Rule, sweep_axis
 
 __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-exported: public API)
     "ConfigError",
@@ -54,10 +56,6 @@ CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PAC
 STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
 HEART_EXCLUSION_VOXEL_SIZE = 1.1533753893850243e-3  # m: R_supply / 4 of the heart at N = 500
-# Upper bounds, so that a typo'd exponent is refused here rather than overflowing after dispatch
-# (Dask's messages carry 64-bit integers). 1e15 proposals are years at the kernel's ~1e7 moves/s.
-MAX_STEPS = 10**15
-MAX_TERMINALS = 10**8  # organ scale is 1e5-1e6 vessels; beyond, no grid or tree would fit in memory
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
 MAX_CHECKPOINT_SECONDS = 7 * 86400.0  # a week: the longest sensible gap between checkpoints
 MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: the map no longer resolves the tissue
@@ -65,7 +63,6 @@ MAX_COARSE_EXCLUSION_FACTOR = 8  # coarser, a coarse voxel is twice R_supply: th
 # trees lie in between (Murray's 3, the paper's coronary 2.1, 2-3 elsewhere). Far outside, the radii
 # span hundreds of decades over N (gamma = 0.01: r_t ~ 1e-230 m) and the flow solve is singular.
 GAMMA_RANGE = (1.0, 4.0)
-SEED_ACCEPTED = "an integer in [0, 2^63)"  # seed and sweep.seeds alike (the generator takes 64-bit seeds)
 
 
 # Keys added after runs were already stored, with the value that does what the code did
@@ -114,10 +111,6 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlet_assignment",
     "bifurcation_reach",
 )
-
-
-class ConfigError(ValueError):
-    """A configuration value out of its accepted range; the message names the field."""
 
 
 @dataclass
@@ -322,62 +315,6 @@ def from_stored(stored: Any) -> RunConfig:
 def _positive(name: str, value: float) -> None:
     if value is None or not (value > 0 and math.isfinite(value)):
         raise ConfigError(f"{name} must be a finite number > 0, got {value}")
-
-
-def seed_ok(value: Any) -> bool:
-    """A valid seed (``seed`` and every ``sweep.seeds`` entry): an integer in [0, 2^63)."""
-    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**63
-
-
-@dataclass(frozen=True)
-class Rule:
-    """The values a key accepts: numbers of ``kind`` (an int may be written 1e5) passing ``ok``."""
-
-    kind: type
-    ok: Callable[[Any], bool]
-    accepted: str
-
-    def check(self, name: str, value: Any) -> Any:
-        """``value`` as ``kind``; a :class:`ConfigError` naming ``name`` when it is not accepted."""
-        if self.kind is int:  # an int, or a float that is one (1e5); never a bool
-            number = (isinstance(value, int) and not isinstance(value, bool)) or (
-                isinstance(value, float) and value.is_integer()
-            )
-        else:
-            number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        try:
-            ok = number and self.ok(self.kind(value))
-        except OverflowError:  # an integer beyond the float range
-            ok = False
-        if not ok:
-            raise ConfigError(f"{name} must be {self.accepted}, got {value!r}")
-        return self.kind(value)
-
-
-# The keys a sweep can scan: one rule each, for the key (n_terminals, physics.m_b, seed,
-# anneal.steps) and for its axis (sweep.n_terminals, sweep.m_b, sweep.seeds, sweep.steps).
-SWEPT_KEYS = {
-    "n_terminals": Rule(int, lambda v: 2 <= v <= MAX_TERMINALS, f"an integer in [2, {MAX_TERMINALS:.0e}]"),
-    "m_b": Rule(float, lambda v: v > 0 and math.isfinite(v), "a finite number > 0"),
-    "seeds": Rule(int, seed_ok, SEED_ACCEPTED),
-    "steps": Rule(int, lambda v: 1 <= v <= MAX_STEPS, f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)"),
-}
-
-
-def sweep_axis(axis: str, values: Any, default: Any) -> list:
-    """The values of ``sweep.<axis>``: a non-empty list of distinct accepted values, or ``[default]``
-    when the axis is not given."""
-    if values is None:
-        return [default]
-    name, rule = f"sweep.{axis}", SWEPT_KEYS[axis]
-    values = list(values)
-    if not values:
-        raise ConfigError(f"{name} must be a non-empty list ({rule.accepted}), got []")
-    out = [rule.check(f"{name}[{i}]", v) for i, v in enumerate(values)]
-    dupes = sorted({v for v in out if out.count(v) > 1})
-    if dupes:
-        raise ConfigError(f"{name} lists {dupes} more than once; every grid point must be distinct")
-    return out
 
 
 def _check_finite(node: Any, name: str) -> None:

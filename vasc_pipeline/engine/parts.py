@@ -1,29 +1,27 @@
-"""One tree annealed in parts: a phase of the anneal run as independent anneals of subtrees.
+"""One tree annealed in parts: a round of a phase of the anneal as independent anneals of parts.
 
-A phase cuts the tree into ``k`` parts, each a set of whole subtrees of about N/k terminals
-(:func:`cut`), and gives every tissue voxel to the part of its nearest terminal
-(:func:`part_regions`). Each part is then annealed on its own (:func:`anneal_parts`), with
-exactly the moves of the whole tree's kernel, on a copy of the tree restricted to its
-subtrees, while everything else is frozen:
+Two kinds of part (:func:`make_parts`), both cut from the tree by :func:`cut`:
 
-- the subtrees' roots hang from *pseudo-inlets*, their parents in the whole tree, whose
-  positions are fixed: each root keeps its terminal count (a swap between two of a part's
-  subtrees must keep their counts), so no segment above the roots changes cost;
-- a terminal may move only while its supply sphere stays inside its part's region: its
-  part's model marks as tissue only the voxels where that holds, and a terminal outside them
-  is frozen (a *border* terminal). Regions are disjoint, so no voxel's supply count changes
-  in two parts.
+- *parts of subtrees*: whole subtrees of about N/k terminals, hanging from fixed
+  pseudo-inlets (their parents in the whole tree); their bifurcations move and their nodes
+  swap, a swap between two pseudo-inlets' trees keeping their terminal counts, so that no
+  segment above the parts changes; their terminals stay put;
+- *parts of terminals*: terminals grouped by place, each hanging from its fixed parent; they
+  move and trade parents, but only where their supply sphere stays inside their group's region
+  (:func:`part_regions`: every tissue voxel belongs to the group of its nearest terminal), so
+  that no voxel's supply count changes in two parts.
 
-Every cost term but C_p is then a sum over segments or over voxels that the parts change
-in disjoint pieces: the parts' changes add up to the whole tree's, exactly (C_p, the
-terminal pressures, couples every segment: it must be off, ``physics.A_p = 0``). Within a
-part the moves are the kernel's own, so detailed balance holds in the part's phase; the
-cut changes from phase to phase, so every terminal and segment is free in some phase.
+Every cost term but C_p is a sum over segments or over voxels that the parts change in
+disjoint pieces: their changes add up to the whole tree's, exactly (:func:`merge_parts`
+recomputes the whole tree's sums; C_p, the terminal pressures, couples every segment and must
+be off, ``physics.A_p = 0``). Within a part the moves are the kernel's own, so for every move
+a part allows, its decision is the whole tree's.
 
 Each part draws from its own generator, seeded from (phase seed, part index), so the result
 is a function of the tree, the phase seed and ``k``, not of how many workers ran the parts or
 in which order they finished (``map`` is any order-preserving map: the builtin, a thread
-pool's, as the kernel releases the GIL, or a cluster's).
+pool's, as the kernel releases the GIL, or a cluster's). The phases themselves are
+:func:`vasc_pipeline.engine.run.run_phase`.
 """
 
 from __future__ import annotations
@@ -36,7 +34,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .. import kernel
-from ..model.rng import next_double, seed_state
+from ..model.rng import seed_state
 from .problem import Problem, restore_state
 
 __all__ = [
@@ -48,9 +46,9 @@ __all__ = [
     "part_state",
     "anneal_parts",
     "anneal_part",
+    "PART_RESULT",
     "merge_parts",
     "phase_ends",
-    "run_phase",
 ]
 
 
@@ -59,17 +57,17 @@ class Part:
     """One part of a phase: its nodes in the part state's order and where its terminals may be.
 
     ``nodes``: global node ids, pseudo-inlets first (the parents of the subtree roots
-    ``roots``, one for each), then the terminals, then the bifurcations of the subtrees;
-    ``n_inlets`` and ``n_terminals`` count the first two groups. ``mask``: uint8 on the
-    supply grid, 1 where a terminal's supply sphere lies in the part's region (and the
-    voxel is tissue).
+    ``roots``, one for each parent), then the terminals, then the bifurcations of the subtrees;
+    ``n_inlets`` and ``n_terminals`` count the first two groups. ``mask``: for a part of
+    terminals, uint8 on the supply grid, 1 where its terminals may be (their supply spheres
+    then stay in the part's region); None for a part of subtrees, whose terminals stay put.
     """
 
     nodes: np.ndarray
     roots: np.ndarray
     n_inlets: int
     n_terminals: int
-    mask: np.ndarray
+    mask: np.ndarray | None
 
 
 def _subtree_terminals(children: np.ndarray, root: int) -> list[int]:
@@ -120,14 +118,15 @@ def cut(
     return [np.array([final[i] for i in order[part_of == p]], dtype=np.int64) for p in range(k)]
 
 
-def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part: np.ndarray, k: int) -> np.ndarray:
-    """uint8 (k, nz, ny, nx): per part, the supply-grid voxels where a terminal's supply sphere
-    lies wholly in the part's region (the tissue voxels whose nearest terminal is the part's,
-    and the voxels outside the tissue, whose counts no sphere changes) and which are tissue.
+def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part: np.ndarray) -> np.ndarray:
+    """int64 (nz, ny, nx): per supply-grid voxel, the part whose terminals may cover it, or -1.
 
-    A terminal at x covers the voxel centres within ρ (the supply radius, voxels) of x, and x
-    lies within √3/2 of its voxel's centre; so a voxel more than ρ + 1 from every voxel of
-    other regions is safe.
+    Every tissue voxel belongs to the part of its nearest terminal. A terminal at x covers
+    the voxel centres within ρ (the supply radius, voxels) of x, and x lies within √3/2 of its
+    voxel's centre; so a terminal may move in a voxel of its part more than ρ + 2 from every
+    voxel at a border between parts (a voxel with a neighbour of another part), which is
+    farther than ρ + 1 from every voxel of another part. Such voxels get their part's index,
+    every other voxel -1.
     """
     t = problem.tissue
     tissue = t.mask != 0
@@ -135,22 +134,44 @@ def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part:
     _, nearest = cKDTree(terminal_position).query(t.origin + t.voxel_size * centres[:, ::-1])
     region = np.full(t.shape, -1, dtype=np.int64)  # -1: not tissue, no count to share
     region[tissue] = terminal_part[nearest]
-    reach = problem.model.supply_rho + 1.0
-    out = np.zeros((k, *t.shape), dtype=np.uint8)
-    for p in range(k):
-        out[p] = (ndimage.distance_transform_edt((region == p) | ~tissue) > reach) & tissue
-    return out
+    border = np.zeros(t.shape, dtype=bool)
+    for axis in range(3):
+        a = [slice(None)] * 3
+        b = [slice(None)] * 3
+        a[axis], b[axis] = slice(1, None), slice(None, -1)
+        differ = (region[tuple(a)] != region[tuple(b)]) & (region[tuple(a)] >= 0) & (region[tuple(b)] >= 0)
+        border[tuple(a)] |= differ
+        border[tuple(b)] |= differ
+    if not border.any():
+        return region
+    far = ndimage.distance_transform_edt(~border) > problem.model.supply_rho + 2.0
+    return np.where(far, region, -1)
 
 
 def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray, leaves: bool = False) -> list[Part]:
-    """The phase's ``k`` parts of the tree in ``state`` (:func:`cut`, :func:`part_regions`);
-    ``leaves``: parts of terminals alone, grouped by position, each hanging from its parent."""
+    """The phase's ``k`` parts of the tree in ``state`` (:func:`cut`).
+
+    Parts of whole subtrees (``leaves`` false) move their bifurcations and swap their nodes;
+    their terminals stay put. Parts of terminals (``leaves``), grouped by place, each hanging
+    from its parent, move their terminals and swap their parents; a terminal joins its part
+    only where its supply sphere stays in the part's region (:func:`part_regions`), and then
+    only there may it move (``Part.mask``).
+    """
     model = problem.model
     roots = cut(state.parent, state.children, state.n_downstream, state.position, model.n_inlets, k, shift, leaves)
-    first_terminal = model.n_inlets
-    first_bifurcation = model.n_inlets + model.n_terminals
-    terminal_part = np.full(model.n_terminals, -1, dtype=np.int64)
-    members = []
+    first_terminal, first_bifurcation = model.n_inlets, model.n_inlets + model.n_terminals
+    masks: list[np.ndarray | None] = [None] * k
+    if leaves:
+        terminal_part = np.empty(model.n_terminals, dtype=np.int64)
+        for p, part_roots in enumerate(roots):
+            terminal_part[part_roots - first_terminal] = p
+        region = part_regions(problem, state.position[first_terminal:first_bifurcation], terminal_part)
+        voxel = np.floor((state.position - model.origin) / model.voxel_size + 0.5).astype(np.int64)
+        for p in range(k):
+            masks[p] = (region == p).astype(np.uint8)
+            x, y, z = voxel[roots[p]].T
+            roots[p] = roots[p][masks[p][z, y, x] != 0]  # the others are border terminals: frozen
+    out = []
     for p, part_roots in enumerate(roots):
         nodes, stack = [], list(part_roots)
         while stack:
@@ -159,20 +180,28 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
             if state.children[node, 0] >= 0:
                 stack.extend(state.children[node])
         nodes = np.sort(np.array(nodes, dtype=np.int64))
+        inlets = np.unique(state.parent[part_roots])  # one pseudo-inlet per parent, with its children here
         terminals = nodes[nodes < first_bifurcation]
-        terminal_part[terminals - first_terminal] = p
-        # one pseudo-inlet per root, even where two roots share a parent (an inlet has one child)
-        members.append((part_roots, terminals, nodes[nodes >= first_bifurcation]))
-    masks = part_regions(problem, state.position[first_terminal:first_bifurcation], terminal_part, k)
-    return [
-        Part(np.concatenate([state.parent[r], t, b]), r, len(r), len(t), masks[p])
-        for p, (r, t, b) in enumerate(members)
-    ]
+        out.append(
+            Part(
+                np.concatenate([inlets, terminals, nodes[nodes >= first_bifurcation]]),
+                part_roots,
+                len(inlets),
+                len(terminals),
+                masks[p],
+            )
+        )
+    return out
 
 
 def part_model(model: kernel.Model, part: Part) -> kernel.Model:
-    """The kernel model of a part: its node counts, its terminals' tissue, counts kept between
-    its subtrees; the whole tree's tables, grids, weights and schedule."""
+    """The kernel model of a part: its node counts, counts kept between its pseudo-inlets'
+    trees, terminals moving only in parts of terminals, within their mask; the whole tree's
+    tables, grids, weights and schedule."""
+    if part.mask is None:
+        return model._replace(
+            n_inlets=part.n_inlets, n_terminals=part.n_terminals, fixed_inlet_counts=True, move_terminals=False
+        )
     return model._replace(n_inlets=part.n_inlets, n_terminals=part.n_terminals, mask=part.mask, fixed_inlet_counts=True)
 
 
@@ -180,16 +209,18 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
     """A kernel state holding the part's subtrees (renumbered in ``part.nodes`` order), the
     whole tree's supply map and C_s, the whole tree's step count and step sizes, and ``rng``."""
     k_in = part.n_inlets
-    own = part.nodes[k_in:]
     local = np.full(state.parent.size, -1, dtype=np.int64)
-    local[own] = np.arange(k_in, part.nodes.size)
+    local[part.nodes[k_in:]] = np.arange(k_in, part.nodes.size)
+    inlet_of = {int(g): j for j, g in enumerate(part.nodes[:k_in])}
+    own = part.nodes[k_in:]
     parent = np.full(part.nodes.size, -1, dtype=np.int64)
     parent[k_in:] = local[state.parent[own]]
     children = np.full((part.nodes.size, 2), -1, dtype=np.int64)
     children[k_in:] = np.where(state.children[own] >= 0, local[np.maximum(state.children[own], 0)], -1)
-    for j, root in enumerate(local[part.roots]):  # pseudo-inlet j: root j's parent in the whole tree
-        parent[root] = j
-        children[j, 0] = root
+    for g, j in inlet_of.items():  # a pseudo-inlet: its children in this part, in their slots' order
+        kids = [local[c] for c in state.children[g] if c >= 0 and local[c] >= 0]
+        children[j, : len(kids)] = kids
+        parent[kids] = j
     m = part.nodes.size
     arrays = {
         "parent": parent,
@@ -210,7 +241,7 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
         "cell_next": np.full(m, -1, dtype=np.int64),
         "cell_prev": np.full(m, -1, dtype=np.int64),
     }
-    sub = restore_state(problem, arrays, n_terminals=part.n_terminals)
+    sub = restore_state(problem, arrays, n_terminals=max(part.n_terminals, 1))
     kernel.initialise_segments(part_model(model, part), sub)
     sub.costs[kernel.SUPPLY] = state.costs[kernel.SUPPLY] + state.compensation[kernel.SUPPLY]
     return sub
@@ -224,24 +255,30 @@ def anneal_parts(
     n_steps: int,
     phase_seed: int,
     map: Callable = map,
-) -> list[kernel.State]:
+) -> list[tuple]:
     """Anneal every part on ``model`` (the whole tree's, or its coarse twin) for its share of
     ``n_steps`` proposals (by node count), from the whole tree's step count on; returns the
-    parts' final states in part order. ``state`` is not changed."""
-    total_nodes = sum(p.nodes.size for p in parts)
+    parts' results (:func:`anneal_part`) in part order. ``state`` is not changed."""
+    total_nodes = max(sum(p.nodes.size - p.n_inlets for p in parts), 1)
     jobs = []
     for index, part in enumerate(parts):
         rng = seed_state(int(np.random.SeedSequence([phase_seed, index]).generate_state(1, np.uint64)[0]))
         sub = part_state(problem, model, state, part, rng)
-        jobs.append((part_model(model, part), sub, int(n_steps) * part.nodes.size // total_nodes))
+        jobs.append((part_model(model, part), sub, int(n_steps) * (part.nodes.size - part.n_inlets) // total_nodes))
     return list(map(anneal_part, jobs))
 
 
-def anneal_part(job: tuple[kernel.Model, kernel.State, int]) -> kernel.State:
-    """One part's anneal, ``(model, state, n_steps)`` -> the state: the task a worker runs."""
+# What a part's anneal hands back: all that the merge reads.
+PART_RESULT = ("position", "parent", "children", "n_downstream", "counters", "step_size")
+
+
+def anneal_part(job: tuple[kernel.Model, kernel.State, int]) -> tuple:
+    """One part's anneal, ``(model, state, n_steps)`` -> the fields of :data:`PART_RESULT` of
+    its final state: the task a worker runs."""
     model, sub, n_steps = job
-    kernel.anneal_block(model, sub, n_steps)
-    return sub
+    if n_steps > 0 and sub.parent.size > model.n_inlets:
+        kernel.anneal_block(model, sub, n_steps)
+    return tuple(getattr(sub, name) for name in PART_RESULT)
 
 
 # The counters the parts add to the whole tree's (the step count and the adaptation windows
@@ -257,30 +294,34 @@ _SUMMED_COUNTERS = [
 ]
 
 
-def merge_parts(model: kernel.Model, state: kernel.State, parts: list[Part], results: list[kernel.State]) -> None:
+def merge_parts(model: kernel.Model, state: kernel.State, parts: list[Part], results: list[tuple]) -> None:
     """Write the parts' subtrees back into ``state``, add their proposals to its counters and
-    take the mean of their step sizes (by node count), then recompute its caches and sums on
+    take the mean (by node count) of the step size their moves adapted (terminals' in parts of
+    terminals, bifurcations' in parts of subtrees), then recompute its caches and sums on
     ``model`` (the supply map and every running sum from scratch: the merged state is exact)."""
     step0 = int(state.counters[kernel.COUNTER_STEP])
     counters = state.counters.copy()
-    step_size = np.zeros(2)
-    for part, sub in zip(parts, results):
-        own = part.nodes[part.n_inlets :]
-        state.position[own] = sub.position[part.n_inlets :]
-        state.parent[own] = part.nodes[sub.parent[part.n_inlets :]]
-        kids = sub.children[part.n_inlets :]
-        state.children[own] = np.where(kids >= 0, part.nodes[np.maximum(kids, 0)], -1)
-        state.n_downstream[own] = sub.n_downstream[part.n_inlets :]
-        # A swap may have hung another of the part's subtrees from a pseudo-inlet: the parents
-        # outside the part take the children their pseudo-inlets ended with, slot by slot.
-        now = dict(zip(part.roots.tolist(), part.nodes[sub.children[: part.n_inlets, 0]].tolist()))
-        for g in np.unique(part.nodes[: part.n_inlets]):
-            state.children[g] = [now.get(c, c) for c in state.children[g]]
-        counters[_SUMMED_COUNTERS] += sub.counters[_SUMMED_COUNTERS] - state.counters[_SUMMED_COUNTERS]
-        counters[kernel.COUNTER_STEP] += int(sub.counters[kernel.COUNTER_STEP]) - step0
-        step_size += part.nodes.size * sub.step_size
+    adapted = 0 if parts and parts[0].mask is not None else 1
+    step, weight = 0.0, 0
+    for part, result in zip(parts, results):
+        position, parent, children, n_downstream, sub_counters, step_size = result
+        k_in = part.n_inlets
+        own = part.nodes[k_in:]
+        mine = set(own.tolist())
+        for j, g in enumerate(part.nodes[:k_in]):  # the slots of g that held this part's nodes
+            kids = iter(part.nodes[c] for c in children[j] if c >= 0)
+            state.children[g] = [next(kids) if c in mine else c for c in state.children[g]]
+        state.position[own] = position[k_in:]
+        state.parent[own] = part.nodes[parent[k_in:]]
+        state.children[own] = np.where(children[k_in:] >= 0, part.nodes[np.maximum(children[k_in:], 0)], -1)
+        state.n_downstream[own] = n_downstream[k_in:]
+        counters[_SUMMED_COUNTERS] += sub_counters[_SUMMED_COUNTERS] - state.counters[_SUMMED_COUNTERS]
+        counters[kernel.COUNTER_STEP] += int(sub_counters[kernel.COUNTER_STEP]) - step0
+        step += own.size * step_size[adapted]
+        weight += own.size
     state.counters[:] = counters
-    state.step_size[:] = step_size / sum(p.nodes.size for p in parts)
+    if weight:
+        state.step_size[adapted] = step / weight
     kernel.initialise(model, state)
 
 
@@ -294,27 +335,3 @@ def phase_ends(problem: Problem) -> np.ndarray:
     if pack < problem.coarse_steps < total:
         ends = np.union1d(ends, [problem.coarse_steps])
     return np.unique(ends[ends > pack])
-
-
-def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable = map) -> None:
-    """One phase of ``n_steps`` proposals from the state's step on, in place: ``anneal.part_share``
-    of them in parts, half in parts of whole subtrees (where a swap or a bifurcation may move;
-    their terminals are mostly border terminals, a subtree's territory being rarely compact),
-    half in parts of terminals grouped by place, each hanging from its fixed parent (where
-    terminals move and trade parents); each cut's shift and its parts' seeds drawn from the
-    whole tree's generator, ``map`` running the parts; then the rest on the whole tree
-    (:func:`vasc_pipeline.engine.run_block`)."""
-    from .run import run_block
-
-    a = problem.config.anneal
-    step = int(state.counters[kernel.COUNTER_STEP])
-    model = problem.coarse_model if step < problem.coarse_steps else problem.model
-    for leaves in (False, True):  # subtrees (their bifurcations and topology), then terminals by place
-        shift = np.array([next_double(state.rng) for _ in range(3)])
-        phase_seed = int(next_double(state.rng) * 2.0**53)
-        parts = make_parts(problem, state, a.parts, shift, leaves)
-        results = anneal_parts(problem, model, state, parts, int(n_steps * a.part_share) // 2, phase_seed, map)
-        merge_parts(model, state, parts, results)
-    rest = step + int(n_steps) - int(state.counters[kernel.COUNTER_STEP])
-    if rest > 0:
-        run_block(problem, state, rest)

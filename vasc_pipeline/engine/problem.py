@@ -370,7 +370,7 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray], n_terminals: 
     n = problem.physics.n_terminals if n_terminals is None else int(n_terminals)
     m = 2 * n
     dtypes = {name: _STATE_INT64.get(name, np.float64) for name in CHECKPOINT_FIELDS}
-    dtypes["supply"] = supply_dtype(n)
+    dtypes["supply"] = supply_dtype(problem.physics.n_terminals)  # a part's is the whole tree's map
     fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes[name]).copy() for name in CHECKPOINT_FIELDS}
     return kernel.State(
         **fields,

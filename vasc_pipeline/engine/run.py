@@ -22,9 +22,10 @@ import numpy as np
 from .. import kernel
 from ..kernel import packing
 from ..model.costs import COST_TERMS, full_costs, vascular_cost
+from ..model.rng import next_double
 from ..model.tree import Tree
 from ..store.run_store import TRACE_FIELDS
-from .parts import phase_ends, run_phase
+from .parts import anneal_parts, make_parts, merge_parts, phase_ends
 from .polish import descend_swaps, polish
 from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
 
@@ -32,6 +33,7 @@ __all__ = [
     "RunResult",
     "Trace",
     "run_block",
+    "run_phase",
     "anneal_blocks",
     "finish",
     "run",
@@ -81,6 +83,27 @@ def _run_model(model: kernel.Model, state: kernel.State, n: int) -> None:
         n -= packing.pack_block(model, state, n)
     if n > 0:
         kernel.anneal_block(model, state, n)
+
+
+def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable = map) -> None:
+    """One phase of ``n_steps`` proposals from the state's step on, in place: ``anneal.part_share``
+    of them in ``anneal.parts`` parts (:mod:`vasc_pipeline.engine.parts`), half in parts of
+    subtrees (bifurcations and swaps; a subtree's territory is rarely compact, so its terminals
+    stay put), half in parts of terminals grouped by place (terminal moves, parents traded);
+    each cut's placement and its parts' seeds drawn from the whole tree's generator, ``map``
+    running the parts; then the rest on the whole tree (:func:`run_block`)."""
+    a = problem.config.anneal
+    step = int(state.counters[kernel.COUNTER_STEP])
+    model = problem.coarse_model if step < problem.coarse_steps else problem.model
+    for leaves in (False, True):  # subtrees (their bifurcations and topology), then terminals by place
+        shift = np.array([next_double(state.rng) for _ in range(3)])
+        phase_seed = int(next_double(state.rng) * 2.0**53)
+        cut = make_parts(problem, state, a.parts, shift, leaves)
+        results = anneal_parts(problem, model, state, cut, int(n_steps * a.part_share) // 2, phase_seed, map)
+        merge_parts(model, state, cut, results)
+    rest = step + int(n_steps) - int(state.counters[kernel.COUNTER_STEP])
+    if rest > 0:
+        run_block(problem, state, rest)
 
 
 class Trace:

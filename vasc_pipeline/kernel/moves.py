@@ -218,10 +218,6 @@ def _translate_node(model, state, i, new, temp):
     state.counters[MOVE_COUNTERS[cls, N_PROPOSED]] += 1
     if not legal_position(model, is_terminal, new):
         return ILLEGAL
-    if is_terminal and not in_tissue(model, pos[i]):
-        # frozen: a terminal outside its model's tissue, as a part's model marks the terminals
-        # whose supply sphere reaches another part (engine.parts); never so in a whole tree
-        return ILLEGAL
     p = state.parent[i]
     c0 = state.children[i, 0]  # -1, -1 for a terminal
     c1 = state.children[i, 1]

@@ -182,13 +182,10 @@ def _dask_run_job(job: Job) -> dict:
             worker.log_event(PROGRESS_TOPIC, msg)
 
     try:
-        if job.run_config().anneal.parts == 1:
+        cfg = job.run_config()
+        if cfg.anneal.parts == 1:
             return run_job(job, report)
-        from distributed import worker_client
-
-        # Seceded while it waits, so that this worker's slot takes parts too; results in part order.
-        with worker_client() as client:
-            return run_job(job, report, lambda f, jobs: client.gather(client.map(f, list(jobs), pure=False)))
+        return run_job(job, report, _cluster_map(cfg.cluster.retries))
     except (OSError, MemoryError):
         raise  # the machine's (filesystem, memory, a store lock): Dask retries, the job resumes
     except Exception as exc:
@@ -200,6 +197,31 @@ def _dask_run_job(job: Job) -> dict:
             "deterministic": True,
             "error": f"{type(exc).__name__}: {exc}",
         }
+
+
+class PartLost(OSError):
+    """A part of a tree in parts did not come back from the cluster (its worker died): the run
+    is retried like a lost job, and resumes from its last checkpoint."""
+
+
+def _cluster_map(retries: int):
+    """A map for the parts of a tree in parts (``anneal.parts`` > 1): on the cluster's workers,
+    results in part order. This task secedes while the parts run, so its slot takes one too."""
+    from distributed import get_client, rejoin, secede
+
+    client = get_client()
+
+    def cluster_map(f, jobs):
+        futures = client.map(f, list(jobs), pure=False, retries=retries)
+        secede()
+        try:
+            return client.gather(futures)
+        except Exception as exc:
+            raise PartLost(f"a part of the tree was lost ({type(exc).__name__}: {exc})") from exc
+        finally:
+            rejoin()
+
+    return cluster_map
 
 
 # --------------------------------------------------------------------------------------------
@@ -304,21 +326,21 @@ def run_sweep(
                     # Keys name the run (dashboard, logs) and this sweep, so that a client reused
                     # for a second sweep never hands back a finished task of the first.
                     token = uuid.uuid4().hex[:8]
-                    try:
-                        futures = {
-                            client.submit(
-                                _dask_run_job,
-                                j,
-                                key=f"vasc-run-{j.run_id}-{token}",
-                                pure=False,
-                                retries=cfg.cluster.retries,
-                            ): j
-                            for j in pending
-                        }
-                    except Exception as exc:  # e.g. a job Dask cannot serialise: it would never start
-                        raise SweepStartError(
-                            f"the jobs could not be submitted to the Dask scheduler ({type(exc).__name__}: {exc})"
-                        ) from exc
+                    queue = list(pending)
+                    # A tree in parts takes the whole cluster for its parts: such runs go one at a time.
+                    window = 1 if any(j.run_config().anneal.parts > 1 for j in pending) else len(queue)
+
+                    def submit(j: Job) -> Any:
+                        try:
+                            key = f"vasc-run-{j.run_id}-{token}"
+                            return client.submit(_dask_run_job, j, key=key, pure=False, retries=cfg.cluster.retries)
+                        except Exception as exc:  # e.g. a job Dask cannot serialise: it would never start
+                            raise SweepStartError(
+                                f"the jobs could not be submitted to the Dask scheduler ({type(exc).__name__}: {exc})"
+                            ) from exc
+
+                    futures = {submit(j): j for j in queue[:window]}
+                    queue = queue[window:]
                     remaining = set(futures)
                     deadline = time.monotonic() + cfg.cluster.startup_timeout
                     running = False
@@ -326,6 +348,11 @@ def run_sweep(
                         done, remaining = _wait_some(wait, remaining, 1.0)
                         for fut in done:
                             _collect(fut, futures[fut], progress, result)
+                            if queue:
+                                j = queue.pop(0)
+                                nxt = submit(j)
+                                futures[nxt] = j
+                                remaining.add(nxt)
                         running = running or bool(done) or progress.any_started
                         if not running and time.monotonic() > deadline:
                             client.cancel(list(futures))
