@@ -70,16 +70,15 @@ class Part:
     mask: np.ndarray | None
 
 
-def _subtree_terminals(children: np.ndarray, root: int) -> list[int]:
-    out, stack = [], [root]
+def _subtree_nodes(children: np.ndarray, roots) -> np.ndarray:
+    """Every node of the subtrees under ``roots`` (the roots included), sorted."""
+    nodes, stack = [], [int(r) for r in roots]
     while stack:
         node = stack.pop()
-        c0, c1 = children[node]
-        if c0 < 0:
-            out.append(node)
-        else:
-            stack.extend((c1, c0))
-    return out
+        nodes.append(node)
+        if children[node, 0] >= 0:
+            stack.extend(children[node].tolist())
+    return np.sort(np.array(nodes, dtype=np.int64))
 
 
 def cut(
@@ -103,7 +102,10 @@ def cut(
             roots.extend((int(children[r, 0]), int(children[r, 1])))
         else:
             final.append(r)
-    centroids = np.array([position[_subtree_terminals(children, r)].mean(axis=0) for r in final])
+    centroids = np.empty((len(final), 3))
+    for i, r in enumerate(final):
+        nodes = _subtree_nodes(children, [r])
+        centroids[i] = position[nodes[children[nodes, 0] < 0]].mean(axis=0)
     lo, hi = centroids.min(axis=0), centroids.max(axis=0)
     cells = 1024
     # the cloud fills half of each axis of the curve's grid, placed at ``shift`` along it
@@ -173,13 +175,7 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
             roots[p] = roots[p][masks[p][z, y, x] != 0]  # the others are border terminals: frozen
     out = []
     for p, part_roots in enumerate(roots):
-        nodes, stack = [], list(part_roots)
-        while stack:
-            node = stack.pop()
-            nodes.append(node)
-            if state.children[node, 0] >= 0:
-                stack.extend(state.children[node])
-        nodes = np.sort(np.array(nodes, dtype=np.int64))
+        nodes = _subtree_nodes(state.children, part_roots)
         inlets = np.unique(state.parent[part_roots])  # one pseudo-inlet per parent, with its children here
         terminals = nodes[nodes < first_bifurcation]
         out.append(
@@ -211,13 +207,12 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
     k_in = part.n_inlets
     local = np.full(state.parent.size, -1, dtype=np.int64)
     local[part.nodes[k_in:]] = np.arange(k_in, part.nodes.size)
-    inlet_of = {int(g): j for j, g in enumerate(part.nodes[:k_in])}
     own = part.nodes[k_in:]
     parent = np.full(part.nodes.size, -1, dtype=np.int64)
     parent[k_in:] = local[state.parent[own]]
     children = np.full((part.nodes.size, 2), -1, dtype=np.int64)
     children[k_in:] = np.where(state.children[own] >= 0, local[np.maximum(state.children[own], 0)], -1)
-    for g, j in inlet_of.items():  # a pseudo-inlet: its children in this part, in their slots' order
+    for j, g in enumerate(part.nodes[:k_in]):  # a pseudo-inlet: its children in this part, in their slots' order
         kids = [local[c] for c in state.children[g] if c >= 0 and local[c] >= 0]
         children[j, : len(kids)] = kids
         parent[kids] = j

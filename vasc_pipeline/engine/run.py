@@ -144,7 +144,7 @@ def anneal_blocks(
     Blocks end on multiples of ``block`` (a resumed state starts on one), so a resumed run
     has exactly the trace of an uninterrupted one. Yields the step count after every block
     (the caller reports progress or checkpoints there). With ``anneal.parts`` > 1 the tree
-    anneal's blocks are its phases (:func:`vasc_pipeline.engine.parts.run_phase`), whose parts
+    anneal's blocks are its phases (:func:`run_phase`), whose parts
     ``part_map`` runs (any order-preserving map: the builtin, a pool's, a cluster's).
     """
     total = problem.total_steps
