@@ -15,17 +15,22 @@ pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.
 BENCHMARKS = sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("*.py"))
 
 
+def run_benchmark(name: str, *args: str, cwd) -> subprocess.CompletedProcess:
+    """``python benchmarks/NAME ARGS`` in ``cwd``; its exit status must be 0."""
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS[0].parent / name), *args], cwd=cwd, capture_output=True, text=True, timeout=900
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done
+
+
 def test_benchmarks_are_found():
     assert {"kernel_profile.py", "kernel_throughput.py"} <= {p.name for p in BENCHMARKS}
 
 
 @pytest.mark.parametrize("script", BENCHMARKS, ids=[p.stem for p in BENCHMARKS])
 def test_benchmark_runs_in_quick_mode(script, tmp_path):
-    done = subprocess.run(
-        [sys.executable, str(script), "--quick"], cwd=tmp_path, capture_output=True, text=True, timeout=900
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
-    lines = done.stdout.splitlines()
+    lines = run_benchmark(script.name, "--quick", cwd=tmp_path).stdout.splitlines()
     assert lines, "a benchmark prints its figures"
     records = [json.loads(line) for line in lines if line.startswith("{")]
     if script.stem in ("kernel_profile", "kernel_throughput"):
@@ -66,15 +71,19 @@ def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
 
 
 def test_time_to_quality_runs_one_tree_in_parts(tmp_path):
-    done = subprocess.run(
-        [sys.executable, str(BENCHMARKS[0].parent / "time_to_quality.py"), "--quick", "--anneal", "fast"]
-        + ["--parts", "2", "--workers", "2", "--out", str(tmp_path)],
+    done = run_benchmark(
+        "time_to_quality.py",
+        "--quick",
+        "--anneal",
+        "fast",
+        "--parts",
+        "2",
+        "--workers",
+        "2",
+        "--out",
+        str(tmp_path),
         cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=900,
     )
-    assert done.returncode == 0, done.stderr[-3000:]
     (row,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
     assert row["anneal"] == "fast-parts2" and row["steps"] == 20_000
     assert (tmp_path / "fast-parts2" / "x1" / "runs").is_dir()
@@ -82,14 +91,7 @@ def test_time_to_quality_runs_one_tree_in_parts(tmp_path):
 
 def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):
     coarse = ["--override", "anneal.coarse_exclusion_factor=2", "--override", "anneal.coarse_exclusion_phase=0.5"]
-    done = subprocess.run(
-        [sys.executable, str(BENCHMARKS[0].parent / "kernel_throughput.py"), "--quick", "--anneal", "fast", *coarse],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = run_benchmark("kernel_throughput.py", "--quick", "--anneal", "fast", *coarse, cwd=tmp_path)
     (record,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
     assert record["overrides"] == coarse[1::2]
     assert 0.3 < record["coarse_exclusion_ratio"] < 3.0

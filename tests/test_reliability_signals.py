@@ -10,20 +10,29 @@ from helpers import ENV, TIMEOUT, TINY_RUN, cli, finish
 
 def test_sigterm_ends_the_sweep_with_a_message(tmp_path):
     proc = cli(*TINY_RUN, "anneal.steps=200000000", "anneal.trace_every=100000", f"output_dir={tmp_path}")
-    try:
+
+    def past_planning():
         deadline = time.monotonic() + TIMEOUT
         while not list(tmp_path.glob("runs/*.zarr/zarr.json")):  # the sweep is past planning
             assert time.monotonic() < deadline and proc.poll() is None, "no store was created"
             time.sleep(0.1)
+
+    code, output = terminate_when(proc, past_planning)
+    assert code == 143, output
+    assert "vasc_pipeline: terminated (SIGTERM). Finished runs are stored" in output, output
+    assert "Traceback" not in output, output
+
+
+def terminate_when(proc, ready) -> tuple[int, str]:
+    """SIGTERM ``proc`` once ``ready()`` returns; (exit status, output). Killed if a check fails."""
+    try:
+        ready()
         proc.send_signal(signal.SIGTERM)
-        code, output = finish(proc)
+        return finish(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert code == 143, output
-    assert "vasc_pipeline: terminated (SIGTERM). Finished runs are stored" in output, output
-    assert "Traceback" not in output, output
 
 
 def test_sigterm_while_the_kernels_compile_ends_the_sweep(tmp_path):
@@ -31,19 +40,16 @@ def test_sigterm_while_the_kernels_compile_ends_the_sweep(tmp_path):
     (llvmlite's callbacks, in which numba compiles, swallowed the interrupt: the sweep ran on)."""
     env = {**ENV, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
     proc = cli(*TINY_RUN, f"output_dir={tmp_path / 'out'}", env=env)
-    try:
+
+    def compiling():
         seen = []
         for line in proc.stderr:  # ends at EOF if the notice never comes
             seen.append(line)
             if "compiling the numba kernels" in line:
                 break
         assert any("compiling the numba kernels" in line for line in seen), "".join(seen)
-        proc.send_signal(signal.SIGTERM)
-        code, output = finish(proc)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+
+    code, output = terminate_when(proc, compiling)
     assert code == 143, output
     assert "vasc_pipeline: terminated (SIGTERM)" in output, output
     assert "Traceback" not in output, output
