@@ -12,7 +12,8 @@ default), ``steps``, ``seed``, ``wall_seconds`` (all sessions of the run, buildi
 problem and the polish included), ``moves_per_second``, ``cost_supply`` (C_s, voxels),
 ``cost_vascular`` (C_v + C_w + A_o/A_wv C_o, W) and its parts ``cost_volume``, ``cost_power``,
 ``cost_exclusion_weighted`` (W), ``cost_total`` (the annealed C), ``cavity_share``, each inlet's
-share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery) and the
+share of the terminals (``terminal_share_<inlet>``; near 0: an abandoned artery), ``parts`` and ``workers`` (the
+threads that ran the parts; 1 for a serial run, which has one core) and the
 morphometry against Kassab 1993 (diameter-defined Strahler, element level, orders shifted to
 11): ``diameter_error_<artery>`` and ``length_error_<artery>`` (mean |log10 model/Kassab|
 over the orders present in both), the same with the terminal order aligned on Kassab's order
@@ -254,7 +255,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     if args.parts > 1:  # one tree at a time, its parts on the workers
         args.override = [*args.override, f"anneal.parts={args.parts}"]
         if args.label is None and len(args.anneal) == 1:
-            args.label = f"{args.anneal[0]}-parts{args.parts}"
+            args.label = f"{args.anneal[0]}-parts{args.parts}-w{args.workers}"  # one store per worker count
         elif args.label is None:
             parser.error("--parts with several --anneal presets needs runs of one preset (or a --label)")
     sizes = args.sizes or DEFAULT_SIZES
@@ -292,6 +293,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for store in finished:
             _, schedule, budget = by_store[store]
             row = row_of(store, schedule, budget)
+            row["parts"], row["workers"] = args.parts, args.workers if args.parts > 1 else 1
             done[store] = row
             print(json.dumps(row), flush=True)
             with rows_file.open("a") as f:

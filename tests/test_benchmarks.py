@@ -85,8 +85,24 @@ def test_time_to_quality_runs_one_tree_in_parts(tmp_path):
         cwd=tmp_path,
     )
     (row,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
-    assert row["anneal"] == "fast-parts2" and row["steps"] == 20_000
-    assert (tmp_path / "fast-parts2" / "x1" / "runs").is_dir()
+    assert row["anneal"] == "fast-parts2-w2" and row["steps"] == 20_000
+    assert (row["parts"], row["workers"]) == (2, 2)
+    assert (tmp_path / "fast-parts2-w2" / "x1" / "runs").is_dir()
+
+
+def test_the_parts_cost_model_times_every_stage_of_a_phase(tmp_path):
+    """One instrumented run in parts: its stages add up to its wall time, its rounds are the
+    phases' two (K parts each), the model's one-worker wall time is the run's own, and the
+    projection names its parts."""
+    run_benchmark("parts_cost_model.py", "--quick", "--out", str(tmp_path), cwd=tmp_path)
+    (row,) = [json.loads(line) for line in (tmp_path / "rows.jsonl").read_text().splitlines()]
+    assert row["phases"] >= 4 and len(row["part_seconds"]) == 2 * row["phases"]  # 4, and the coarse map's end
+    assert all(len(r) == 2 for r in row["part_seconds"])
+    stages = row["fixed"] + row["cut"] + row["states"] + row["merge"] + row["whole"] + row["parts_serial"]
+    assert stages == pytest.approx(row["wall_seconds"])
+    assert row["fixed"] > 0 and row["parts_serial"] > 0 and row["whole"] > 0 and row["bytes_per_part"] > 0
+    assert row["predicted_wall"]["1"] == pytest.approx(row["wall_seconds"])
+    assert row["predicted_wall"]["2"] < row["predicted_wall"]["1"]
 
 
 def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):

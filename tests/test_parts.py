@@ -13,6 +13,7 @@ from helpers import assert_killed_job_resumes_bit_identically, assert_running_eq
 from vasc_pipeline import config, engine, kernel
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.engine import parts
+from vasc_pipeline.kernel import margins
 
 SPHERE = ["tissue=sphere", "n_terminals=400", "anneal.steps=2000000"]
 
@@ -25,6 +26,26 @@ def annealed():
     engine.run_block(problem, state, 1_000_000)
     kernel.initialise(problem.model, state)
     return problem, state
+
+
+@pytest.mark.parametrize("radius", [0.0, 1.0, 2.5, 4.87, 6.0])
+def test_the_margins_are_the_distance_transforms(radius):
+    """kernel.mark_margins marks the voxels that one exact distance transform per part puts
+    within the radius of another part, across non-tissue gaps and at the grid's faces too."""
+    rng = np.random.default_rng(int(radius * 10))
+    shape = (17, 23, 19)
+    seeds = rng.integers(0, shape, size=(9, 3))
+    grid = np.stack(np.meshgrid(*map(np.arange, shape), indexing="ij"), axis=-1)
+    region = np.argmin(((grid[..., None, :] - seeds) ** 2).sum(axis=-1), axis=-1) % 3  # 3 parts
+    region[rng.random(shape) < 0.2] = -1  # non-tissue, some of it between parts
+    region[:, 11:13, :] = -1  # a gap two voxels wide
+    marked = np.zeros(shape, dtype=bool)
+    margins.mark_margins(region, radius, marked)
+    np.testing.assert_array_equal(marked, margins.margins_reference(region, radius))
+    assert marked.any() == (radius >= 1.0)
+    one_part = np.where(region >= 0, 0, -1)
+    margins.mark_margins(one_part, radius, marked)
+    assert not marked.any()
 
 
 @pytest.mark.parametrize("leaves", [False, True], ids=["subtrees", "terminals"])

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .. import kernel
+from ..kernel.margins import mark_margins
 from ..model.rng import seed_state
 from .problem import Problem, restore_state
 
@@ -120,34 +120,31 @@ def cut(
     return [np.array([final[i] for i in order[part_of == p]], dtype=np.int64) for p in range(k)]
 
 
+# How far beyond the supply radius (voxels) another part's voxels are kept from a movable
+# terminal's voxel: its offset from the voxel centre (√3/2), and a hair for rounding.
+MARGIN_SLACK = 0.5 * np.sqrt(3.0) + 1e-9
+
+
 def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part: np.ndarray) -> np.ndarray:
-    """int64 (nz, ny, nx): per supply-grid voxel, the part whose terminals may cover it, or -1.
+    """int64 (nz, ny, nx): per supply-grid voxel, the part whose terminals may lie in it, or -1.
 
     Every tissue voxel belongs to the part of its nearest terminal. A terminal at x covers
-    the voxel centres within ρ (the supply radius, voxels) of x, and x lies within √3/2 of its
-    voxel's centre; so a terminal may move in a voxel of its part more than ρ + 2 from every
-    voxel at a border between parts (a voxel with a neighbour of another part), which is
-    farther than ρ + 1 from every voxel of another part. Such voxels get their part's index,
+    the voxel centres within ρ (the supply radius, voxels) of x, and x lies within √3/2 of
+    its voxel's centre; so a terminal in a voxel with no voxel of another part within
+    ρ + √3/2 covers only voxels of its own part (:func:`vasc_pipeline.kernel.margins.mark_margins`,
+    which also sees another part across a thin cavity). Such voxels get their part's index,
     every other voxel -1.
     """
     t = problem.tissue
     tissue = t.mask != 0
     centres = np.argwhere(tissue)  # (z, y, x) indices
-    _, nearest = cKDTree(terminal_position).query(t.origin + t.voxel_size * centres[:, ::-1])
+    _, nearest = cKDTree(terminal_position).query(t.origin + t.voxel_size * centres[:, ::-1], workers=-1)
     region = np.full(t.shape, -1, dtype=np.int64)  # -1: not tissue, no count to share
     region[tissue] = terminal_part[nearest]
-    border = np.zeros(t.shape, dtype=bool)
-    for axis in range(3):
-        a = [slice(None)] * 3
-        b = [slice(None)] * 3
-        a[axis], b[axis] = slice(1, None), slice(None, -1)
-        differ = (region[tuple(a)] != region[tuple(b)]) & (region[tuple(a)] >= 0) & (region[tuple(b)] >= 0)
-        border[tuple(a)] |= differ
-        border[tuple(b)] |= differ
-    if not border.any():
-        return region
-    far = ndimage.distance_transform_edt(~border) > problem.model.supply_rho + 2.0
-    return np.where(far, region, -1)
+    near = np.zeros(t.shape, dtype=bool)
+    mark_margins(region, problem.model.supply_rho + MARGIN_SLACK, near)
+    region[near] = -1
+    return region
 
 
 def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray, leaves: bool = False) -> list[Part]:

@@ -12,6 +12,7 @@ The kernel sees only two named tuples of arrays and scalars (built by
 - :mod:`~vasc_pipeline.kernel.moves`: translate and swap, their ΔC and commit
 - :mod:`~vasc_pipeline.kernel.loop`: initialise, :func:`anneal_block`, uphill sampling
 - :mod:`~vasc_pipeline.kernel.packing`: the packing phase (supply term alone)
+- :mod:`~vasc_pipeline.kernel.margins`: voxels near another part's region (a tree in parts)
 
 :func:`anneal_block` runs a block of proposed moves from ``state`` and returns; the
 temperature and every random draw depend only on the step number and the saved state, so
