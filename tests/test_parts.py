@@ -8,12 +8,20 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
-from helpers import assert_killed_job_resumes_bit_identically, assert_running_equals_full, check_tree, make_problem
+from helpers import (
+    TRUE_EXCLUSION_MAP,
+    assert_killed_job_resumes_bit_identically,
+    assert_running_equals_full,
+    check_tree,
+    make_problem,
+    reference_swap,
+)
 
-from vasc_pipeline import config, engine, kernel
+from vasc_pipeline import config, costs, engine, kernel
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.engine import parts
 from vasc_pipeline.kernel import margins
+from vasc_pipeline.model.tree import Tree, children_from_parent, count_terminals
 
 SPHERE = ["tissue=sphere", "n_terminals=400", "anneal.steps=2000000"]
 
@@ -165,3 +173,49 @@ def test_a_sweep_runs_one_tree_in_parts_on_the_clusters_workers(tmp_path):
         (store,) = (tmp_path / "runs").glob(f"*-s{seed}.zarr")
         alone = engine.run(config.compose(overrides), seed=seed)
         np.testing.assert_array_equal(RunStore.open(store, mode="r").read_tree()["position"], alone.tree.position)
+
+
+def test_swaps_inside_a_part_sample_the_whole_trees_boltzmann_distribution():
+    """Detailed balance inside one part with the rest of the tree frozen: swaps alone, at a
+    constant temperature, in a part of subtrees (its pseudo-inlets' terminal counts kept) visit
+    every tree they can reach with probability exp(-C/T)/Z, C the whole tree's cost."""
+    problem = make_problem("tissue=sphere", "n_terminals=16", "anneal=fast", *TRUE_EXCLUSION_MAP)
+    state = engine.initial_state(problem, seed=3)
+    k, n = problem.physics.n_inlets, problem.physics.n_terminals
+    w_o, w_p, _ = problem.physics.weights
+    cut = parts.make_parts(problem, state, 4, np.array([0.1, 0.2, 0.3]))
+    part = max(cut, key=lambda p: (p.n_terminals <= 5, p.n_terminals))
+    model = parts.part_model(problem.model, part)._replace(p_swap=1.0)
+    sub = parts.part_state(problem, model, state, part, engine.initial_state(problem, 7).rng)
+    k_in, own = part.n_inlets, part.nodes[part.n_inlets :]
+
+    def counts(local):  # terminals under each pseudo-inlet
+        return count_terminals(local, part.n_terminals, k_in)[:k_in]
+
+    def energy(local):  # the whole tree's annealed total less the supply term, which no swap changes
+        parent = state.parent.copy()
+        parent[own] = part.nodes[local[k_in:]]
+        tree = Tree(parent, children_from_parent(parent), state.position, count_terminals(parent, n, k), k)
+        c = costs.full_costs(tree, problem.tissue, problem.physics, problem.terms)
+        return c["volume"] + c["power"] + w_o * c["exclusion"] + w_p * c["pressure"]
+
+    start, energies, todo = counts(sub.parent), {}, [sub.parent.copy()]
+    while todo:  # every tree of the part that swaps keeping the counts reach
+        p = todo.pop()
+        if p.tobytes() not in energies:
+            energies[p.tobytes()] = energy(p)
+            pairs = ((a, b) for a in range(k_in, p.size) for b in range(a + 1, p.size))
+            todo.extend(q for q in (reference_swap(p, a, b) for a, b in pairs) if q is not None)
+            todo = [q for q in todo if np.array_equal(counts(q), start)]
+    e = np.array(list(energies.values()))
+    temp = float(np.std(e))
+    sub.schedule[:] = temp
+    index = {key: i for i, key in enumerate(energies)}
+    visits = np.zeros(e.size)
+    for _ in range(50_000):
+        kernel.anneal_block(model, sub, 30)
+        visits[index[sub.parent.tobytes()]] += 1
+    boltzmann = np.exp(-(e - e.min()) / temp)
+    boltzmann /= boltzmann.sum()
+    assert e.size >= 10 and boltzmann.max() < 0.5, (e.size, part.n_terminals, part.n_inlets)
+    assert 0.5 * np.abs(visits / visits.sum() - boltzmann).sum() < 0.03
