@@ -67,7 +67,15 @@ def test_the_cut_partitions_the_tree_into_balanced_parts(annealed, leaves):
     everyone = np.arange(model.n_inlets, model.n_inlets + model.n_terminals)
     if leaves:  # the terminals free to move, their regions' interiors disjoint
         assert 0.15 * everyone.size < terminals.size < everyone.size
-        assert np.array([p.mask for p in cut], dtype=int).sum(axis=0).max() <= 1
+        cover = np.zeros(problem.tissue.shape, dtype=int)
+        for p in cut:  # each mask on its box of the supply grid
+            box = tuple(slice(a, a + n) for a, n in zip(p.corner, p.mask.shape))
+            cover[box] += p.mask
+            lo, hi = p.corner, p.corner + p.mask.shape  # the box holds every voxel its spheres reach
+            reach, voxels = np.ceil(problem.model.supply_rho + parts.MARGIN_SLACK), np.argwhere(p.mask) + lo
+            assert np.all((voxels.min(axis=0) - reach >= lo) | (lo == 0))
+            assert np.all((voxels.max(axis=0) + reach < hi) | (hi == problem.tissue.shape))
+        assert cover.max() <= 1
     else:
         assert np.array_equal(np.sort(terminals), everyone)
         assert max(p.n_terminals for p in cut) <= 1.5 * model.n_terminals / k

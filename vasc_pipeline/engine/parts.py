@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .. import kernel
@@ -59,8 +60,11 @@ class Part:
     ``nodes``: global node ids, pseudo-inlets first (the parents of the subtree roots
     ``roots``, one for each parent), then the terminals, then the bifurcations of the subtrees;
     ``n_inlets`` and ``n_terminals`` count the first two groups. ``mask``: for a part of
-    terminals, uint8 on the supply grid, 1 where its terminals may be (their supply spheres
-    then stay in the part's region); None for a part of subtrees, whose terminals stay put.
+    terminals, uint8 on the box ``corner`` (z, y, x index of its first voxel) of the supply
+    grid, 1 where its terminals may be; the box holds every voxel their supply spheres may
+    reach (:data:`MARGIN_SLACK` beyond the supply radius), and the part's kernel sees the
+    supply map and the tissue only there. None for a part of subtrees, whose terminals stay
+    put and which sees neither.
     """
 
     nodes: np.ndarray
@@ -68,6 +72,7 @@ class Part:
     n_inlets: int
     n_terminals: int
     mask: np.ndarray | None
+    corner: np.ndarray | None = None
 
 
 def _subtree_nodes(children: np.ndarray, roots) -> np.ndarray:
@@ -160,16 +165,22 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
     roots = cut(state.parent, state.children, state.n_downstream, state.position, model.n_inlets, k, shift, leaves)
     first_terminal, first_bifurcation = model.n_inlets, model.n_inlets + model.n_terminals
     masks: list[np.ndarray | None] = [None] * k
+    corners: list[np.ndarray | None] = [None] * k
     if leaves:
         terminal_part = np.empty(model.n_terminals, dtype=np.int64)
         for p, part_roots in enumerate(roots):
             terminal_part[part_roots - first_terminal] = p
         region = part_regions(problem, state.position[first_terminal:first_bifurcation], terminal_part)
         voxel = np.floor((state.position - model.origin) / model.voxel_size + 0.5).astype(np.int64)
+        reach = int(np.ceil(model.supply_rho + MARGIN_SLACK))  # how far a sphere reaches beyond its voxel
+        boxes = ndimage.find_objects(region + 1, max_label=k)  # each part's voxels' bounding box
         for p in range(k):
-            masks[p] = (region == p).astype(np.uint8)
             x, y, z = voxel[roots[p]].T
-            roots[p] = roots[p][masks[p][z, y, x] != 0]  # the others are border terminals: frozen
+            roots[p] = roots[p][region[z, y, x] == p]  # the others are border terminals: frozen
+            box = boxes[p] or (slice(0, 1),) * 3
+            lo = np.array([max(b.start - reach, 0) for b in box], dtype=np.int64)
+            box = tuple(slice(a, min(b.stop + reach, n)) for a, b, n in zip(lo, box, region.shape))
+            masks[p], corners[p] = (region[box] == p).astype(np.uint8), lo
     out = []
     for p, part_roots in enumerate(roots):
         nodes = _subtree_nodes(state.children, part_roots)
@@ -182,6 +193,7 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
                 len(inlets),
                 len(terminals),
                 masks[p],
+                corners[p],
             )
         )
     return out
@@ -189,13 +201,28 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
 
 def part_model(model: kernel.Model, part: Part) -> kernel.Model:
     """The kernel model of a part: its node counts, counts kept between its pseudo-inlets'
-    trees, terminals moving only in parts of terminals, within their mask; the whole tree's
-    tables, grids, weights and schedule."""
-    if part.mask is None:
+    trees, terminals moving only in parts of terminals, within their mask (the supply grid
+    then the part's box); the whole tree's tables, exclusion grid, weights and schedule."""
+    if part.mask is None:  # its terminals stay put: no tissue to look up
         return model._replace(
-            n_inlets=part.n_inlets, n_terminals=part.n_terminals, fixed_inlet_counts=True, move_terminals=False
+            n_inlets=part.n_inlets,
+            n_terminals=part.n_terminals,
+            mask=_NO_GRID,
+            fixed_inlet_counts=True,
+            move_terminals=False,
         )
-    return model._replace(n_inlets=part.n_inlets, n_terminals=part.n_terminals, mask=part.mask, fixed_inlet_counts=True)
+    return model._replace(
+        n_inlets=part.n_inlets,
+        n_terminals=part.n_terminals,
+        mask=part.mask,
+        origin=model.origin + model.voxel_size * part.corner[::-1],
+        bifurcation_region=np.zeros((0, 0, 0), dtype=np.uint8),  # its bifurcations are pseudo-inlets: fixed
+        fixed_inlet_counts=True,
+    )
+
+
+# The grid a part's kernel never reads (the tissue of a part whose terminals stay put).
+_NO_GRID = np.zeros((1, 1, 1), dtype=np.uint8)
 
 
 def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part: Part, rng: np.ndarray) -> kernel.State:
@@ -221,7 +248,7 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
         "n_downstream": state.n_downstream[part.nodes],
         "seg_length": np.zeros(m),
         "seg_exclusion": np.zeros(m),
-        "supply": state.supply,
+        "supply": _part_supply(state.supply, part),
         "costs": np.zeros_like(state.costs),
         "compensation": np.zeros_like(state.compensation),
         "rng": rng,
@@ -237,6 +264,14 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
     kernel.initialise_segments(part_model(model, part), sub)
     sub.costs[kernel.SUPPLY] = state.costs[kernel.SUPPLY] + state.compensation[kernel.SUPPLY]
     return sub
+
+
+def _part_supply(supply: np.ndarray, part: Part) -> np.ndarray:
+    """The part's view of the supply map: its box's, or one voxel where it reads none."""
+    if part.mask is None:
+        return supply[:1, :1, :1]
+    box = tuple(slice(a, a + n) for a, n in zip(part.corner, part.mask.shape))
+    return supply[box]
 
 
 def anneal_parts(
