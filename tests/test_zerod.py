@@ -53,7 +53,7 @@ def test_a_hand_built_tree_gives_the_network_by_hand():
 @pytest.fixture(scope="module")
 def annealed():
     """A heart tree (two inlets) after a short anneal."""
-    return engine.run(config.compose(["tissue=heart", "n_terminals=60", "anneal=fast_v1", "anneal.steps=300000"]), 1)
+    return engine.run(config.compose(["tissue=heart", "n_terminals=1000", "anneal=fast_v1", "anneal.steps=1000000"]), 1)
 
 
 def test_svzerod_reproduces_the_models_flows_pressures_and_pumping_power(annealed):
