@@ -100,6 +100,20 @@ def test_exclusion_mask_and_terminals_csv_are_part_of_the_identity(tmp_path):
         plan_and_create(overrides)
 
 
+def test_an_inlets_file_is_part_of_the_identity(tmp_path):
+    mask = tmp_path / "tissue.npy"
+    np.save(mask, ball(16, 7.0))
+    base = [o for o in mask_overrides(mask, tmp_path / "out") if not o.startswith("tissue.inlets=")]
+    inlets = tmp_path / "ostia.json"
+    inlets.write_text('{"ostium": [0.0075, 0.0075, 0.0145]}')
+    overrides = [*base, f"tissue.inlets_path={inlets}"]
+    (j,) = plan_and_create(overrides).jobs
+    assert set(store.RunStore.open(j.store, mode="r").attrs["config"][INPUTS]) == {"tissue.path", "tissue.inlets_path"}
+    inlets.write_text('{"ostium": [0.0075, 0.0075, 0.0005]}')  # the other pole: another tree
+    with pytest.raises(ConfigError, match=r"tissue\.inlets_path: the content of .*ostia\.json.* changed in place"):
+        plan_and_create([*overrides, "+sweep=single", "sweep.seeds=[0,1]"])
+
+
 def test_a_store_written_before_the_input_digests_keeps_resuming(tmp_path):
     mask = tmp_path / "tissue.npy"
     np.save(mask, ball(16, 7.0))
