@@ -4,11 +4,11 @@ A part of terminals (engine.parts) owns the tissue voxels nearest to its termina
 terminals may move only where their supply spheres cannot reach a voxel of another part.
 :func:`mark_margins` marks, for every tissue voxel, whether a voxel of another part lies
 within a Euclidean radius: a scan of the ball around each tissue voxel, one row segment at a
-time (each read in O(1) from the runs of one part along its row), a row of centres against
-one row of the ball at a time, so that both are read in order. It sees every other part's voxel, also across a gap of
-non-tissue (a cavity thinner than the ball), which a test of adjacent voxels would miss.
-:func:`margins_reference` is the same set from scipy's exact distance transform, one per
-part, which tests compare against.
+time, each read in O(1) from the runs of one part along its row (a row of centres against
+one row of the ball, so that both are read in order). It sees every other part's voxel, also
+across a gap of non-tissue (a cavity thinner than the ball), which a test of adjacent voxels
+would miss. :func:`margins_reference` is the same set from scipy's exact distance transform,
+one per part, which tests compare against.
 """
 
 from __future__ import annotations
