@@ -67,7 +67,6 @@ class PhaseTimer:
         # the module, not the function ``engine.run`` that the package exports under its name
         self.module = importlib.import_module("vasc_pipeline.engine.run")
         self.phases: list[dict] = []
-        self.outside = 0.0  # run_block before the phases (and between them: none)
         self.bytes_per_part: list[int] = []
         self._saved = {}
 
@@ -124,11 +123,9 @@ class PhaseTimer:
     def _add(self, key, seconds):
         self.phases[-1][key] += seconds
 
-    def _block(self, seconds):
+    def _block(self, seconds):  # blocks outside the phases (packing) count in the row's "fixed"
         if self.phases and self.phases[-1]["in_phase"]:
             self.phases[-1]["whole"] += seconds
-        else:
-            self.outside += seconds
 
     def __exit__(self, *exc):
         for name, original in self._saved.items():

@@ -69,8 +69,7 @@ def test_the_cut_partitions_the_tree_into_balanced_parts(annealed, leaves):
         assert 0.15 * everyone.size < terminals.size < everyone.size
         cover = np.zeros(problem.tissue.shape, dtype=int)
         for p in cut:  # each mask on its box of the supply grid
-            box = tuple(slice(a, a + n) for a, n in zip(p.corner, p.mask.shape))
-            cover[box] += p.mask
+            cover[p.box] += p.mask
             lo, hi = p.corner, p.corner + p.mask.shape  # the box holds every voxel its spheres reach
             reach, voxels = np.ceil(problem.model.supply_rho + parts.MARGIN_SLACK), np.argwhere(p.mask) + lo
             assert np.all((voxels.min(axis=0) - reach >= lo) | (lo == 0))

@@ -74,6 +74,11 @@ class Part:
     mask: np.ndarray | None
     corner: np.ndarray | None = None
 
+    @property
+    def box(self) -> tuple[slice, ...]:
+        """The slices of the supply grid that ``mask`` covers (a part of terminals)."""
+        return tuple(slice(a, a + n) for a, n in zip(self.corner, self.mask.shape))
+
 
 def _subtree_nodes(children: np.ndarray, roots) -> np.ndarray:
     """Every node of the subtrees under ``roots`` (the roots included), sorted."""
@@ -268,10 +273,7 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
 
 def _part_supply(supply: np.ndarray, part: Part) -> np.ndarray:
     """The part's view of the supply map: its box's, or one voxel where it reads none."""
-    if part.mask is None:
-        return supply[:1, :1, :1]
-    box = tuple(slice(a, a + n) for a, n in zip(part.corner, part.mask.shape))
-    return supply[box]
+    return supply[:1, :1, :1] if part.mask is None else supply[part.box]
 
 
 def anneal_parts(
