@@ -47,6 +47,13 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
         (row,) = records
         assert row["n_terminals"] == 20 and row["variant"] == ["supply_shell_width=0"]
         assert row["speedup"] > 0 and len(row["speedup_by_third"]) == 3
+    if script.stem == "compile_profile":  # fill_uniform -> next_double -> next_u64 -> _rotl, all compiled
+        total, *functions = records
+        names = {r["function"] for r in functions}
+        assert {"model.rng.fill_uniform", "model.rng.next_u64", "model.rng._rotl"} <= names
+        assert total["compilations"] == sum(r["compilations"] for r in functions) >= 4
+        outer = next(r for r in functions if r["function"] == "model.rng.fill_uniform")
+        assert 0 < outer["own_s"] < outer["inclusive_s"] <= total["inclusive_s"]
     if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
         absolute = [r for r in records if r.get("fit") == "supply_per_terminal"]
         assert absolute and all(r["alpha"] == pytest.approx(1.5, abs=0.05) for r in absolute)

@@ -43,11 +43,11 @@ def inlet_shares(study: str, run_id: str) -> str:
     return "/".join(f"{np.mean(inlet[terminal] == i):.2f}" for i in np.flatnonzero(parent < 0))
 
 
-def size_scan(summary: xr.DataTree) -> None:
+def size_scan(summary: xr.DataTree, study: str) -> None:
     comp = summary["comparison"].to_dataset().squeeze("m_b", drop=True)
     morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
     costs = summary["costs"].to_dataset().squeeze("m_b", drop=True)
-    print("## size_scan: per N (comparison_summary.csv; summary.zarr /costs)")
+    print(f"## {study}: per N (comparison_summary.csv; summary.zarr /costs)")
     print(
         "N | seeds | wall per run [min] | best C_s | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | orders | "
         "terminal share LCA/RCA"
@@ -63,10 +63,10 @@ def size_scan(summary: xr.DataTree) -> None:
         print(
             f"{int(n)} | {int(m['n_seeds'])} | {np.nanmean(wall) / 60:.1f} | "
             f"{float(costs['cost_supply'].sel(n_terminals=n).min()):.4g} | {d} | {ln} | "
-            f"{orders.min()}-{orders.max()} | {inlet_shares('size_scan', str(m['best_run_id'].values))}"
+            f"{orders.min()}-{orders.max()} | {inlet_shares(study, str(m['best_run_id'].values))}"
         )
     n = int(max(v for v in comp.n_terminals.values if str(morph["best_run_id"].sel(n_terminals=v).values)))
-    print(f"\n## size_scan: the largest tree, N = {n}, per order (comparison.csv), dex model/Kassab")
+    print(f"\n## {study}: the largest tree, N = {n}, per order (comparison.csv), dex model/Kassab")
     print(
         "order | model D [um] | LAD D | dex D LAD | RCA | LCX | model L [mm] | LAD L | dex L LAD | RCA | LCX | elements"
     )
@@ -84,7 +84,7 @@ def size_scan(summary: xr.DataTree) -> None:
             + f" | {int(lad['model_count'])}"
         )
     asym = summary["asymmetry"].to_dataset().squeeze("m_b", drop=True).sel(scheme=SCHEME)
-    print("\n## size_scan: asymmetry by parent order (summary.zarr /asymmetry): D_s/D_p, D_l/D_p (bifurcations)")
+    print(f"\n## {study}: asymmetry by parent order (summary.zarr /asymmetry): D_s/D_p, D_l/D_p (bifurcations)")
     for n in asym.n_terminals.values:
         a = asym.sel(n_terminals=n)
         ok = (a["bifurcation_count"] > 0).values
@@ -99,16 +99,16 @@ def size_scan(summary: xr.DataTree) -> None:
     print(f"symmetric value 2^(-1/gamma) = {float(asym['symmetric_ratio'].max()):.3f}")
 
 
-def size_scan_readings(summary: xr.DataTree) -> None:
+def size_scan_readings(summary: xr.DataTree, study: str) -> None:
     """The best trees under both readings of Jiang's reassignment (vasc_pipeline.reduce.ordering)."""
     morph = summary["morphometry"].to_dataset().squeeze("m_b", drop=True)
-    print("\n## size_scan: the best trees under both readings of the ordering (trees/<run_id>.csv)")
+    print(f"\n## {study}: the best trees under both readings of the ordering (trees/<run_id>.csv)")
     print("N | reading | orders | mean dex D RCA/LAD/LCX | mean dex L RCA/LAD/LCX | dex D LAD per order (trunk = 11)")
     for n in morph.n_terminals.values:
         run_id = str(morph["best_run_id"].sel(n_terminals=n).values)
         if not run_id:
             continue
-        arrays = tree_arrays("size_scan", run_id)
+        arrays = tree_arrays(study, run_id)
         for reading in READINGS:
             ds = morphometry(*arrays, reading=reading)
             tables = {a: compare_with_kassab(ds, a) for a in ("RCA", "LAD", "LCX")}
@@ -178,10 +178,12 @@ def consistency(summary: xr.DataTree) -> None:
 
 def main() -> int:
     found = False
-    if (s := open_summary("size_scan")) is not None:
-        size_scan(s)
-        size_scan_readings(s)
-        found = True
+    # Today's model, and the scan under the earlier one (exclusion on the supply grid, fast_v1).
+    for study in ("size_scan", "size_scan_fast_v1"):
+        if (s := open_summary(study)) is not None:
+            size_scan(s, study)
+            size_scan_readings(s, study)
+            found = True
     if (s := open_summary("mb_scan")) is not None:
         mb_scan(s)
         found = True

@@ -19,9 +19,9 @@ temperature and every random draw depend only on the step number and the saved s
 S steps in one block or any split of blocks give bit-identical trees.
 
 Every function is module-level and compiled with :mod:`vasc_pipeline._jit`'s flags
-(``cache=True``). Numba's cache checks only the file of the function it compiled, not the
-files of the functions it calls and inlines: after editing one kernel module, clear the
-cache (``find vasc_pipeline -name '*.nbi' -delete``) before trusting a measurement.
+(``cache=True``). The cache is keyed by the content of every kernel module
+(:func:`vasc_pipeline._jit.kernel_cache_dir`): an edit of any of them, also of a function
+that another module's kernel inlines, compiles afresh.
 """
 
 from . import cells, exclusion, loop, moves, pressure, schedule, state, supply

@@ -14,10 +14,10 @@ from ..model.physics import TABLE_POWER, TABLE_VOLUME
 from ..model.rng import next_below, next_double
 from .cells import build_cells
 from .exclusion import _distance3, recompute_exclusion
-from .moves import _swap, _translate, swap_random, translate_node
+from .moves import _adapt_step, _swap, _translate_node, _translation
 from .pressure import pressure_cost
 from .schedule import temperature, weighted_total
-from .state import COUNTER_STEP, EXCLUSION, POWER, PRESSURE, SUPPLY, VOLUME, _add
+from .state import ACCEPTED, COUNTER_STEP, EXCLUSION, ILLEGAL, POWER, PRESSURE, SUPPLY, VOLUME, _add
 from .supply import supply_sphere
 
 __all__ = [
@@ -26,7 +26,11 @@ __all__ = [
     "initialise_segments",
     "sample_uphill",
     "scaled_total_without_supply",
+    "translate_node",
 ]
+
+# What :func:`_moves` does with its moves.
+_ANNEAL, _SAMPLE, _TRANSLATE = 0, 1, 2
 
 
 @jit  # once per run; np.count_nonzero needs the reference-counted runtime
@@ -72,24 +76,77 @@ def initialise_segments(model, state):
 @jit
 def anneal_block(model, state, n_steps):
     """Propose ``n_steps`` moves from ``state`` (in place), continuing its step count."""
-    _anneal_steps(model, state, n_steps, np.empty(3))
+    _moves(model, state, n_steps, np.empty(3), np.int64(_ANNEAL), np.int64(-1), 0.0, np.empty(0))
+
+
+@jit
+def translate_node(model, state, i, new, temp):
+    """Propose moving node i to ``new``; Metropolis at ``temp``. Returns ILLEGAL, REJECTED or ACCEPTED.
+
+    A terminal must land in tissue, a bifurcation inside the grid's box and its region.
+    """
+    return _moves(model, state, 1, new, np.int64(_TRANSLATE), np.int64(i), np.float64(temp), np.empty(0))
 
 
 @jit_norc
-def _anneal_steps(model, state, n_steps, new):
-    """The move loop of :func:`anneal_block` (``new``: scratch (3,)).
+def _moves(model, state, n_steps, new, mode, node, temp_given, out):
+    """Every proposal of moves, in one function: numba inlines a move's body where it is called,
+    and inlining the two moves once here, not once per caller, halves the first run's
+    compilation. Callers pass ``mode`` and ``node`` as ``np.int64``: a literal constant would
+    make numba compile one copy per value. Compiled without reference counting (see ``_jit.jit_norc``), as is every
+    function it calls. ``new``: scratch (3,), or the target of a single translation.
 
-    Compiled without reference counting (see ``_jit.jit_norc``), as is every function
-    it calls, and the moves are inlined here.
+    - ``_ANNEAL``: ``n_steps`` moves of the schedule (:func:`anneal_block`).
+    - ``_SAMPLE``: ``n_steps`` moves at infinite temperature, swaps and bifurcation
+      translations alike; the uphill ΔC go to ``out``; returns how many (:func:`sample_uphill`).
+    - ``_TRANSLATE``: node ``node`` to ``new`` at ``temp_given``; returns the outcome
+      (:func:`translate_node`).
     """
+    rng = state.rng
+    first_bif = model.n_inlets + model.n_terminals
+    n_bif = state.parent.size - first_bif
+    stored = 0
+    outcome = ILLEGAL
     for _ in range(n_steps):
-        step = state.counters[COUNTER_STEP]
-        temp = temperature(model, state, step)
-        if next_double(state.rng) < model.p_swap:
-            _swap(model, state, temp)
+        step = 0
+        before = 0.0
+        if mode == _ANNEAL:
+            step = state.counters[COUNTER_STEP]
+            temp = temperature(model, state, step)
+            swap = next_double(rng) < model.p_swap
+        elif mode == _SAMPLE:
+            before = scaled_total_without_supply(model, state)
+            temp = np.inf
+            swap = n_bif == 0 or next_double(rng) < 0.5
         else:
-            _translate(model, state, temp, new)
-        state.counters[COUNTER_STEP] = step + 1
+            temp = temp_given
+            swap = False
+        if swap:
+            outcome = _swap(model, state, temp)
+        else:
+            i = node
+            cls = 1
+            adapt = False
+            if mode == _ANNEAL:
+                i, cls, adapt = _translation(model, state, new)
+            elif mode == _SAMPLE:
+                i = first_bif + next_below(rng, n_bif)
+                half = state.step_size[1]
+                for a in range(3):
+                    new[a] = state.position[i, a] + (2.0 * next_double(rng) - 1.0) * half
+                if model.planar:
+                    new[2] = state.position[i, 2]
+            outcome = _translate_node(model, state, i, new, temp) if i >= 0 else ILLEGAL
+            if adapt:
+                _adapt_step(model, state, cls, outcome == ACCEPTED)
+        if mode == _ANNEAL:
+            state.counters[COUNTER_STEP] = step + 1
+        elif mode == _SAMPLE:
+            d = scaled_total_without_supply(model, state) - before
+            if d > 0.0 and stored < out.size:
+                out[stored] = d
+                stored += 1
+    return stored if mode == _SAMPLE else outcome
 
 
 @jit_norc
@@ -120,28 +177,4 @@ def sample_uphill(model, state, n_samples, out):
     on a copy of a state: every legal proposal is accepted. Returns how many ΔC > 0
     were stored (at most ``out.size``).
     """
-    return _sample_uphill(model, state, n_samples, out, np.empty(3))
-
-
-@jit_norc
-def _sample_uphill(model, state, n_samples, out, new):
-    first_bif = model.n_inlets + model.n_terminals
-    n_bif = state.parent.size - first_bif
-    stored = 0
-    for _ in range(n_samples):
-        before = scaled_total_without_supply(model, state)
-        if n_bif == 0 or next_double(state.rng) < 0.5:
-            swap_random(model, state, np.inf)
-        else:
-            i = first_bif + next_below(state.rng, n_bif)
-            half = state.step_size[1]
-            for a in range(3):
-                new[a] = state.position[i, a] + (2.0 * next_double(state.rng) - 1.0) * half
-            if model.planar:
-                new[2] = state.position[i, 2]
-            translate_node(model, state, i, new, np.inf)
-        d = scaled_total_without_supply(model, state) - before
-        if d > 0.0 and stored < out.size:
-            out[stored] = d
-            stored += 1
-    return stored
+    return _moves(model, state, n_samples, np.empty(3), np.int64(_SAMPLE), np.int64(-1), 0.0, out)

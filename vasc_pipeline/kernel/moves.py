@@ -42,7 +42,6 @@ __all__ = [
     "legal_position",
     "swap_nodes",
     "swap_random",
-    "translate_node",
 ]
 
 # A traversal is stopped where ΔC reaches this many temperatures when the move has drawn no
@@ -89,8 +88,13 @@ def _new_exclusion(model, p0, p1, n, temp, rng, u, bound, vascular, pre, mid, ol
 
 
 @jit_norc_inline
-def _translate(model, state, temp, new):
-    """Propose moving a random non-inlet node by a uniform random displacement (``new``: scratch (3,))."""
+def _translation(model, state, new):
+    """Draw the node and the position of a translation as the move loop proposes them: a random
+    non-inlet node, displaced uniformly (into ``new``, scratch (3,)).
+
+    Returns (node, class, adapt): node -1 when no node may move; class 0 for a terminal, 1 for
+    a bifurcation; adapt, whether the proposal counts towards its class's step adaptation.
+    """
     rng = state.rng
     pos = state.position
     k_in = model.n_inlets
@@ -100,7 +104,7 @@ def _translate(model, state, temp, new):
         i = k_in + next_below(rng, n_nodes - k_in)
     else:
         if n_nodes == first_bif:
-            return ILLEGAL
+            return -1, 1, False
         i = first_bif + next_below(rng, n_nodes - first_bif)
     cls = 0 if i < first_bif else 1
     half = state.step_size[cls]
@@ -116,10 +120,7 @@ def _translate(model, state, temp, new):
         new[a] = pos[i, a] + (2.0 * next_double(rng) - 1.0) * half
     if model.planar:
         new[2] = pos[i, 2]
-    outcome = _translate_node(model, state, i, new, temp)
-    if model.adapt_steps and not full_width:
-        _adapt_step(model, state, cls, outcome == ACCEPTED)
-    return outcome
+    return i, cls, model.adapt_steps and not full_width
 
 
 @jit_norc_inline
@@ -150,15 +151,6 @@ def _adapt_step(model, state, cls, accepted):
         state.step_size[cls] = min(max(width, 1e-9 * model.step_max[cls]), model.step_max[cls])
         c[i_proposed] = 0
         c[i_accepted] = 0
-
-
-@jit_norc
-def translate_node(model, state, i, new, temp):
-    """Propose moving node i to ``new``; Metropolis at ``temp``. Returns ILLEGAL, REJECTED or ACCEPTED.
-
-    A terminal must land in tissue, a bifurcation inside the grid's box and its region.
-    """
-    return _translate_node(model, state, i, new, temp)
 
 
 @jit_norc_inline
@@ -203,7 +195,7 @@ def legal_position(model, is_terminal, p):
 
 @jit_norc_inline
 def _translate_node(model, state, i, new, temp):
-    """:func:`translate_node`, inlined into the move loop (:func:`_anneal_steps`).
+    """:func:`translate_node`, inlined into the move loop (``kernel.loop._moves``).
 
     The moved node's own segment (to its parent p) and, for a bifurcation, its children's
     segments (c0, c1) change length; n does not change. Cheap terms first: unless
@@ -406,7 +398,10 @@ def _swap(model, state, temp):
 
 @jit_norc
 def swap_random(model, state, temp):
-    """Propose a swap of a random pair (:func:`_swap`), for callers outside the move loop."""
+    """Propose a swap of a random pair (:func:`_swap`), for callers outside the move loop.
+
+    Its own compiled copy of the swap: the calibration uses the move loop's
+    (``kernel.loop._moves``)."""
     return _swap(model, state, temp)
 
 
@@ -422,7 +417,7 @@ def swap_nodes(model, state, a, b, temp):
 
 @jit_norc_inline
 def _swap_nodes(model, state, a, b, temp):
-    """:func:`swap_nodes`, inlined into the move loop (:func:`_anneal_steps`)."""
+    """:func:`swap_nodes`, inlined into the move loop (``kernel.loop._moves``)."""
     rng = state.rng
     pos = state.position
     parent = state.parent
