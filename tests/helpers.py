@@ -201,3 +201,8 @@ def assert_killed_job_resumes_bit_identically(overrides: list[str], kill_before:
     tree = job.read_final_tree(j.store)
     np.testing.assert_array_equal(tree["parent"], reference.tree.parent)
     np.testing.assert_array_equal(tree["position"], reference.tree.position)
+
+
+def store_attrs(path: Path) -> dict:
+    """Root attributes read straight from zarr.json (an atomic file: safe while a job writes)."""
+    return json.loads((path / "zarr.json").read_text())["attributes"]

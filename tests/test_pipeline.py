@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 import os
 import re
 import signal
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from helpers import ENV, TIMEOUT, cli, finish, free_port  # noqa: E402
+from helpers import ENV, TIMEOUT, cli, finish, free_port, store_attrs  # noqa: E402
 
 from vasc_pipeline import config, engine, job, store, sweep
 from vasc_pipeline.config.frozen import thawed
@@ -76,11 +75,6 @@ def assert_runs_match_references(cfg: config.RunConfig) -> None:
         assert a["steps_done"] == j.config["anneal"]["steps"] and a["cost"] == ref.costs
         for k, v in a["cost"].items():
             assert a["cost_recomputed"][k] == pytest.approx(v, rel=1e-9, abs=1e-300), (j.run_id, k)
-
-
-def store_attrs(path: Path) -> dict:
-    """Root attributes read straight from zarr.json (an atomic file: safe while a job writes)."""
-    return json.loads((path / "zarr.json").read_text())["attributes"]
 
 
 def results_snapshot(out: Path) -> dict[str, str]:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import REPO, TIMEOUT, cli, finish
+from helpers import REPO, TIMEOUT, cli, finish, store_attrs
 
 from vasc_pipeline import config, job, sweep
 from vasc_pipeline.store import RunStore
@@ -118,7 +118,11 @@ def test_a_cancelled_worker_job_is_replaced_and_the_run_resumes_to_the_same_tree
     cancelled = None
     try:
         while time.monotonic() < deadline and proc.poll() is None:  # a checkpoint, then cancel the worker
-            if store.exists() and RunStore.open(store, mode="r").attrs.get("steps_done", 0) > 0:
+            try:  # the store's root metadata appears once the job has created it
+                checkpointed = store_attrs(store).get("steps_done", 0) > 0
+            except (OSError, ValueError):
+                checkpointed = False
+            if checkpointed:
                 jobs = _running_worker_jobs()
                 if jobs:
                     cancelled = jobs[0]
