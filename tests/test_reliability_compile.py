@@ -31,7 +31,13 @@ def signatures():
     return {f"{m.__name__}.{k}": len(v.signatures) for m in mods for k, v in vars(m).items()
             if isinstance(v, CPUDispatcher)}
 before = signatures()
-engine.run(jobs[-1].config, seed=jobs[-1].coords["seed"])
+result = engine.run(jobs[-1].config, seed=jobs[-1].coords["seed"])
+# the polish's single translations, which a short run's polish may not need
+from vasc_pipeline import kernel
+from vasc_pipeline.model.rng import seed_state
+state = engine.state_from_tree(result.problem, result.tree, seed_state(1))
+node = int(result.tree.parent.size - 1)
+kernel.translate_node(result.problem.model, state, node, state.position[node] + 1e-6, 1e-300)
 print(json.dumps(sorted(k for k, n in signatures().items() if n > before.get(k, 0))))
 """
 

@@ -85,15 +85,15 @@ def translate_node(model, state, i, new, temp):
 
     A terminal must land in tissue, a bifurcation inside the grid's box and its region.
     """
-    return _moves(model, state, 1, new, np.int64(_TRANSLATE), np.int64(i), np.float64(temp), np.empty(0))
+    return _moves(model, state, np.int64(1), new, np.int64(_TRANSLATE), np.int64(i), np.float64(temp), np.empty(0))
 
 
 @jit_norc
 def _moves(model, state, n_steps, new, mode, node, temp_given, out):
     """Every proposal of moves, in one function: numba inlines a move's body where it is called,
     and inlining the two moves once here, not once per caller (the loop, the calibration, the
-    polish), cut the first run's compilation by a quarter. Callers pass ``mode`` and ``node``
-    as ``np.int64``: a literal constant would make numba compile one copy per value. Compiled
+    polish), cut the first run's compilation by a quarter. Callers pass every integer as
+    ``np.int64``: a literal constant would make numba compile one copy per value. Compiled
     without reference counting (see ``_jit.jit_norc``), as is every function it calls.
     ``new``: scratch (3,), or the target of a single translation.
 

@@ -146,9 +146,23 @@ def _warm_up(jobs: list[Job]) -> None:
                 grow(engine.build_problem(cfg), 0)
                 continue
             steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
-            engine.run(replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64)), seed=int(cfg.seed))
+            few_moves = replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64))
+            result = engine.run(few_moves, seed=int(cfg.seed))
+            _warm_up_translation(result)
         except Exception:  # the job itself fails the same way, and its run reports it
             continue
+
+
+def _warm_up_translation(result: Any) -> None:
+    """The polish's single translations (``kernel.translate_node``): a run of a few moves is
+    usually polished in one piece and never calls them, a real run often does."""
+    from .. import engine, kernel
+    from ..model.rng import seed_state
+
+    problem = result.problem
+    state = engine.state_from_tree(problem, result.tree, seed_state(0))
+    node = problem.model.n_inlets  # any node that may move; moved onto itself
+    kernel.translate_node(problem.model, state, node, state.position[node].copy(), 1e-300)
 
 
 def _warm_up_generic() -> None:
