@@ -116,7 +116,7 @@ def compile_kernels(jobs: list[Job] | None = None, stream: TextIO | None = None)
     slow = worker.is_alive()
     if slow and stream is not None:
         stream.write(
-            "vasc_pipeline: compiling the numba kernels (first run only, about 1-3 min; cached for later runs)...\n"
+            "vasc_pipeline: compiling the numba kernels (first run only, about 1-2 min; cached for later runs)...\n"
         )
         stream.flush()
     while worker.is_alive():
