@@ -71,9 +71,9 @@ def _install_cache_locator() -> None:
             return self._cache_path
 
         def get_source_stamp(self):
-            # The content, not the file's mtime (which differs between copies).
-            with open(self._py_file, "rb") as f:
-                return hashlib.sha256(f.read()).hexdigest()
+            # The directory is named by the content of every kernel module, this file's among
+            # them; a file's mtime, numba's stamp, differs between copies of the same source.
+            return cache_dir.name
 
         @classmethod
         def from_function(cls, py_func, py_file):
