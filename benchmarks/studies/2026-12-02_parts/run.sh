@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# One tree on several workers (anneal.parts), heart, today's `fast`: the measurements of this
+# study that take hours, resumable. Every run is a checkpointed pipeline job of
+# benchmarks/time_to_quality.py: rerun the same command after an interruption (SIGTERM, a
+# session's end) and it continues inside the run where it stopped. Rows go to OUT/rows.jsonl
+# and are merged into rows.jsonl beside this script after each part.
+#
+#     bash benchmarks/studies/2026-12-02_parts/run.sh [OUT [PART ...]]
+#
+# OUT defaults to results/studies/parts; PART (default all, in this order):
+#   share     N = 2000, K = 2, anneal.part_share 0.9 / 0.95 / 0.99, seeds 0, 1, one thread
+#             (the trees do not depend on the thread count; only their quality is read)
+#   n6000     N = 6000, the serial run (one core) and K = 2, 4, 8 on 2 threads, seeds 0, 1: the
+#             wall-time target, so the machine must hold nothing else
+#   n20000    N = 20 000, K = 4 on 2 threads, seed 0: the organ-scale run (hours; spans sessions)
+#   calibrate the cost model's calibration point, N = 6000, K = 4, seed 0, one thread (not
+#             resumable: about an hour in one go)
+# Run with the environment that has vasc_pipeline installed (the script calls `python`).
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+cd "$here/../../.."
+OUT=${1:-results/studies/parts}
+PARTS=("${@:2}")
+[ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate)
+T=(python benchmarks/time_to_quality.py --out "$OUT" --anneal fast)
+for part in "${PARTS[@]}"; do
+  case $part in
+    share)
+      for share in 0.9 0.95 0.99; do
+        "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 \
+          --override anneal.part_share=$share --label "fast-parts2-share$share"
+      done ;;
+    n6000)
+      "${T[@]}" --sizes 6000 --seeds 0 1 --workers 1
+      for k in 2 4 8; do "${T[@]}" --sizes 6000 --seeds 0 1 --parts $k --workers 2; done ;;
+    n20000)
+      "${T[@]}" --sizes 20000 --seeds 0 --parts 4 --workers 2 ;;
+    calibrate)
+      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 6000 --parts 4 --seeds 0
+      cat "$OUT/cost_model/rows.jsonl" >> "$here/cost_model_rows.jsonl"
+      sort -u -o "$here/cost_model_rows.jsonl" "$here/cost_model_rows.jsonl" ;;
+    *) echo "PART must be share, n6000, n20000 or calibrate, got '$part'" >&2; exit 2 ;;
+  esac
+  [ -f "$OUT/rows.jsonl" ] || continue
+  cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
+  sort -u -o "$here/rows.jsonl" "$here/rows.jsonl"
+done
