@@ -180,17 +180,20 @@ def fit_power(ns, values) -> tuple[float, float]:
     return float(np.exp(log_a)), float(b)
 
 
-def project(rows: list[dict], n: int, workers: list[int], bandwidth: float) -> list[dict]:
+def project(rows: list[dict], n: int, workers: list[int], bandwidth: float, share: float | None = None) -> list[dict]:
     """The model at N = ``n`` on each worker count (K = W parts), from power laws in N fitted
     to the measured rows: per move, the parts' and the whole tree's seconds; per phase, the
-    cut, states and merge; per run, the fixed part; per part, the bytes shipped."""
+    cut, states and merge; per run, the fixed part; per part, the bytes shipped. ``share``:
+    the ``anneal.part_share`` to project (default the rows'; the costs are per move, so the
+    rows' own share only sets how their time divides)."""
     from vasc_pipeline import config
     from vasc_pipeline.config import scheduled_steps, to_run_config
 
     ns = [r["n_terminals"] for r in rows]
-    s = rows[0]["part_share"]
-    per_move_parts = fit_power(ns, [r["parts_serial"] / (s * r["steps"]) for r in rows])
-    per_move_whole = fit_power(ns, [r["whole"] / ((1 - s) * r["steps"]) for r in rows])
+    measured = rows[0]["part_share"]
+    per_move_parts = fit_power(ns, [r["parts_serial"] / (measured * r["steps"]) for r in rows])
+    per_move_whole = fit_power(ns, [r["whole"] / ((1 - measured) * r["steps"]) for r in rows])
+    s = measured if share is None else share
     per_phase = fit_power(ns, [(r["cut"] + r["states"] + r["merge"]) / r["phases"] for r in rows])
     fixed = fit_power(ns, [r["fixed"] for r in rows])
     bytes_part = fit_power(ns, [r["bytes_per_part"] for r in rows])
@@ -227,6 +230,7 @@ def project(rows: list[dict], n: int, workers: list[int], bandwidth: float) -> l
                     "bytes_per_part": bytes_part,
                 },
                 "imbalance": imbalance,
+                "part_share": s,
             }
         )
     return out
@@ -264,6 +268,7 @@ def main(argv=None):
     parser.add_argument("--predict-workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--check", type=Path, help="time_to_quality rows.jsonl of measured runs in parts")
     parser.add_argument("--project", type=int, help="N to project to (on 16 and 64 workers, K = W)")
+    parser.add_argument("--project-share", type=float, help="anneal.part_share to project (default: the rows')")
     parser.add_argument("--bandwidth", type=float, default=1e9, help="bytes/s to ship parts (default 1e9)")
     parser.add_argument("--quick", action="store_true", help="one tiny run (N = 200) in a temporary dir")
     args = parser.parse_args(argv)
@@ -307,10 +312,11 @@ def main(argv=None):
                 f"measured {c['measured_s']:.0f} s, predicted {c['predicted_s']:.0f} s ({c['ratio'] - 1:+.0%})"
             )
     if args.project and rows:
-        result["projection"] = project(rows, args.project, [16, 64], args.bandwidth)
+        result["projection"] = project(rows, args.project, [16, 64], args.bandwidth, args.project_share)
         for p in result["projection"]:
             print(
-                f"projection N={p['n_terminals']} on {p['workers']} workers (K = {p['parts']}): {p['hours']:.1f} h "
+                f"projection N={p['n_terminals']} on {p['workers']} workers (K = {p['parts']}, part_share "
+                f"{p['part_share']:g}): {p['hours']:.1f} h "
                 f"(parts {p['parts_hours']:.1f}, whole tree {p['whole_hours']:.1f}, phase overhead "
                 f"{p['overhead_hours']:.2f}, transfer {p['transfer_hours']:.2f}, fixed {p['fixed_hours']:.2f})"
             )

@@ -94,7 +94,7 @@ def test_the_parts_changes_add_up_to_the_whole_trees_exactly(annealed, leaves):
         sub = parts.part_state(problem, problem.model, state, part, engine.initial_state(problem, index).rng)
         start = sub.costs + sub.compensation
         accepted = int(sub.counters[kernel.COUNTER_TERMINAL_ACCEPTED if leaves else kernel.COUNTER_SWAP_ACCEPTED])
-        results.append(parts.anneal_part((parts.part_model(problem.model, part), sub, 200_000)))
+        results.append(parts.anneal_part((parts.part_model(problem.model, part), sub, 200_000, 400_000)))
         expected += (sub.costs + sub.compensation) - start
         assert sub.counters[kernel.COUNTER_TERMINAL_ACCEPTED if leaves else kernel.COUNTER_SWAP_ACCEPTED] > accepted
     parts.merge_parts(problem.model, state, cut, results)
@@ -226,3 +226,25 @@ def test_swaps_inside_a_part_sample_the_whole_trees_boltzmann_distribution():
     boltzmann /= boltzmann.sum()
     assert e.size >= 10 and boltzmann.max() < 0.5, (e.size, part.n_terminals, part.n_inlets)
     assert 0.5 * np.abs(visits / visits.sum() - boltzmann).sum() < 0.03
+
+
+def test_a_parts_moves_follow_the_whole_rounds_schedule(monkeypatch):
+    """A part proposing n moves while the round runs ``span`` steps starts each leg where the
+    whole tree's schedule stands at that share of the span, and ends with n steps counted."""
+    starts = []
+
+    def record(model, state, n):
+        starts.append((int(state.counters[kernel.COUNTER_STEP]), n))
+        state.counters[kernel.COUNTER_STEP] += n
+
+    monkeypatch.setattr(kernel, "anneal_block", record)
+    problem = make_problem("tissue=sphere", "n_terminals=16", "anneal=fast")
+    state = engine.initial_state(problem, seed=3)
+    state.counters[kernel.COUNTER_STEP] = 1_000
+    part = max(parts.make_parts(problem, state, 2, np.array([0.1, 0.2, 0.3])), key=lambda p: p.n_terminals)
+    sub = parts.part_state(problem, problem.model, state, part, engine.initial_state(problem, 7).rng)
+    counters = parts.anneal_part((parts.part_model(problem.model, part), sub, 6_400, 64_000))[4]
+    assert len(starts) == parts.SCHEDULE_LEGS
+    assert [s for s, _ in starts] == [1_000 + 1_000 * leg for leg in range(parts.SCHEDULE_LEGS)]
+    assert sum(n for _, n in starts) == 6_400
+    assert counters[kernel.COUNTER_STEP] == 1_000 + 6_400

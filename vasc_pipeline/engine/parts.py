@@ -286,14 +286,16 @@ def anneal_parts(
     map: Callable = map,
 ) -> list[tuple]:
     """Anneal every part on ``model`` (the whole tree's, or its coarse twin) for its share of
-    ``n_steps`` proposals (by node count), from the whole tree's step count on; returns the
-    parts' results (:func:`anneal_part`) in part order. ``state`` is not changed."""
+    ``n_steps`` proposals (by node count), along the schedule of the whole tree's next
+    ``n_steps`` steps (:func:`anneal_part`); returns the parts' results in part order.
+    ``state`` is not changed."""
     total_nodes = max(sum(p.nodes.size - p.n_inlets for p in parts), 1)
     jobs = []
     for index, part in enumerate(parts):
         rng = seed_state(int(np.random.SeedSequence([phase_seed, index]).generate_state(1, np.uint64)[0]))
         sub = part_state(problem, model, state, part, rng)
-        jobs.append((part_model(model, part), sub, int(n_steps) * (part.nodes.size - part.n_inlets) // total_nodes))
+        share = int(n_steps) * (part.nodes.size - part.n_inlets) // total_nodes
+        jobs.append((part_model(model, part), sub, share, int(n_steps)))
     return list(map(anneal_part, jobs))
 
 
@@ -301,12 +303,30 @@ def anneal_parts(
 PART_RESULT = ("position", "parent", "children", "n_downstream", "counters", "step_size")
 
 
-def anneal_part(job: tuple[kernel.Model, kernel.State, int]) -> tuple:
-    """One part's anneal, ``(model, state, n_steps)`` -> the fields of :data:`PART_RESULT` of
-    its final state: the task a worker runs."""
-    model, sub, n_steps = job
+# Legs of a part's anneal, each starting where the whole tree's schedule stands at that share
+# of the round: a part's temperature then lags the schedule by at most 1/SCHEDULE_LEGS of a
+# round (25 000 steps of 1.6 million at N = 2000).
+SCHEDULE_LEGS = 64
+
+
+def anneal_part(job: tuple[kernel.Model, kernel.State, int, int]) -> tuple:
+    """One part's anneal, ``(model, state, n_steps, span)`` -> the fields of :data:`PART_RESULT`
+    of its final state: the task a worker runs.
+
+    The part proposes ``n_steps`` moves while the whole tree's schedule runs ``span`` steps on
+    from the state's step: its moves are spread over that span (in :data:`SCHEDULE_LEGS` legs,
+    each starting at its share of the span), so every part cools as far as the round does,
+    not by its own n_steps alone (a part of 1/k of the tree would end each round at the
+    temperature of 1/k of it). Its step count then reads ``n_steps`` more, as if unstrided, for
+    the merge's count of proposals."""
+    model, sub, n_steps, span = job
     if n_steps > 0 and sub.parent.size > model.n_inlets:
-        kernel.anneal_block(model, sub, n_steps)
+        start = int(sub.counters[kernel.COUNTER_STEP])
+        legs = min(SCHEDULE_LEGS, n_steps)
+        for leg in range(legs):
+            sub.counters[kernel.COUNTER_STEP] = start + span * leg // legs
+            kernel.anneal_block(model, sub, n_steps * (leg + 1) // legs - n_steps * leg // legs)
+        sub.counters[kernel.COUNTER_STEP] = start + n_steps
     return tuple(getattr(sub, name) for name in PART_RESULT)
 
 
