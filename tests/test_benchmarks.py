@@ -99,8 +99,8 @@ def test_time_to_quality_runs_one_tree_in_parts(tmp_path):
 
 def test_the_parts_cost_model_times_every_stage_of_a_phase(tmp_path):
     """One instrumented run in parts: its stages add up to its wall time, its rounds are the
-    phases' two (K parts each), the model's one-worker wall time is the run's own, and the
-    projection names its parts."""
+    phases' two (K parts each), the model's one-worker wall time is the run's own, and a
+    projection at another part_share divides the same per-move costs anew."""
     run_benchmark("parts_cost_model.py", "--quick", "--out", str(tmp_path), cwd=tmp_path)
     (row,) = [json.loads(line) for line in (tmp_path / "rows.jsonl").read_text().splitlines()]
     assert row["phases"] >= 4 and len(row["part_seconds"]) == 2 * row["phases"]  # 4, and the coarse map's end
@@ -110,6 +110,17 @@ def test_the_parts_cost_model_times_every_stage_of_a_phase(tmp_path):
     assert row["fixed"] > 0 and row["parts_serial"] > 0 and row["whole"] > 0 and row["bytes_per_part"] > 0
     assert row["predicted_wall"]["1"] == pytest.approx(row["wall_seconds"])
     assert row["predicted_wall"]["2"] < row["predicted_wall"]["1"]
+    # projected at another anneal.part_share: the same seconds per move, divided anew
+    sys.path.insert(0, str(BENCHMARKS[0].parent))
+    try:
+        import parts_cost_model
+    finally:
+        sys.path.pop(0)
+    (own,) = parts_cost_model.project([row], 1000, [16], 1e9)
+    (other,) = parts_cost_model.project([row], 1000, [16], 1e9, share=0.99)
+    assert (own["part_share"], other["part_share"]) == (row["part_share"], 0.99)
+    assert other["whole_hours"] == pytest.approx(own["whole_hours"] * 0.01 / (1 - row["part_share"]))
+    assert other["parts_hours"] == pytest.approx(own["parts_hours"] * 0.99 / row["part_share"])
 
 
 def test_kernel_throughput_measures_a_coarse_exclusion_map(tmp_path):
