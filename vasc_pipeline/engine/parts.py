@@ -317,7 +317,7 @@ def anneal_part(job: tuple[kernel.Model, kernel.State, int, int]) -> tuple:
     from the state's step: its moves are spread over that span (in :data:`SCHEDULE_LEGS` legs,
     each starting at its share of the span), so every part cools as far as the round does,
     not by its own n_steps alone (a part of 1/k of the tree would end each round at the
-    temperature of 1/k of it). Its step count then reads ``n_steps`` more, as if unstrided, for
+    temperature of 1/k of it). Its step count then reads ``n_steps`` more, as without the legs, for
     the merge's count of proposals."""
     model, sub, n_steps, span = job
     if n_steps > 0 and sub.parent.size > model.n_inlets:
