@@ -3,6 +3,7 @@
 Correctness of the scripts' plumbing only (tiny sizes, seconds each): no timing is asserted.
 """
 
+import importlib
 import json
 import subprocess
 import sys
@@ -64,13 +65,18 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
         assert sum(row[f"terminal_share_{name}"] for name in ("LCA", "RCA")) == pytest.approx(1)
 
 
-def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
-    """A variant's label names its directory; '=' and spaces in it must not reach Hydra's grammar."""
+def benchmark_module(name: str):
+    """A script of benchmarks/ imported as a module, to call its functions."""
     sys.path.insert(0, str(BENCHMARKS[0].parent))
     try:
-        import time_to_quality
+        return importlib.import_module(name)
     finally:
         sys.path.pop(0)
+
+
+def test_time_to_quality_takes_a_label_with_override_syntax(tmp_path):
+    """A variant's label names its directory; '=' and spaces in it must not reach Hydra's grammar."""
+    time_to_quality = benchmark_module("time_to_quality")
     label = "mix p_swap=0.7"
     (job,) = time_to_quality.jobs_for(tmp_path, "fast", 0.3, 40, [0], 2000, ["anneal.p_swap=0.7"], label)
     assert Path(job.store).parent.parent == tmp_path / label / "x0.3"
@@ -111,11 +117,7 @@ def test_the_parts_cost_model_times_every_stage_of_a_phase(tmp_path):
     assert row["predicted_wall"]["1"] == pytest.approx(row["wall_seconds"])
     assert row["predicted_wall"]["2"] < row["predicted_wall"]["1"]
     # projected at another anneal.part_share: the same seconds per move, divided anew
-    sys.path.insert(0, str(BENCHMARKS[0].parent))
-    try:
-        import parts_cost_model
-    finally:
-        sys.path.pop(0)
+    parts_cost_model = benchmark_module("parts_cost_model")
     (own,) = parts_cost_model.project([row], 1000, [16], 1e9)
     (other,) = parts_cost_model.project([row], 1000, [16], 1e9, share=0.99)
     assert (own["part_share"], other["part_share"]) == (row["part_share"], 0.99)

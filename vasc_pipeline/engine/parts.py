@@ -305,7 +305,7 @@ PART_RESULT = ("position", "parent", "children", "n_downstream", "counters", "st
 
 # Legs of a part's anneal, each starting where the whole tree's schedule stands at that share
 # of the round: a part's temperature then lags the schedule by at most 1/SCHEDULE_LEGS of a
-# round (25 000 steps of 1.6 million at N = 2000).
+# round (about 22 000 steps of a round's 1.4 million at N = 2000).
 SCHEDULE_LEGS = 64
 
 
