@@ -15,13 +15,16 @@
 #   n20000    N = 20 000, K = 4 on 2 threads, seed 0: the organ-scale run (hours; spans sessions)
 #   calibrate the cost model's calibration point, N = 6000, K = 4, seed 0, one thread (not
 #             resumable: about an hour in one go)
+#   check     the cost model's check at N = 2000, seed 0: its calibration at K = 4 and 8 (K = 2 is
+#             calibrated by parts_cost_model.py at N = 1000 and 2000), then K = 2, 4, 8 measured on 1
+#             and 2 threads, and the comparison (half an hour; the machine must hold nothing else)
 # Run with the environment that has vasc_pipeline installed (the script calls `python`).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../../.."
 OUT=${1:-results/studies/parts}
 PARTS=("${@:2}")
-[ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate)
+[ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate check)
 T=(python benchmarks/time_to_quality.py --out "$OUT" --anneal fast)
 for part in "${PARTS[@]}"; do
   case $part in
@@ -39,7 +42,13 @@ for part in "${PARTS[@]}"; do
       python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 6000 --parts 4 --seeds 0
       cat "$OUT/cost_model/rows.jsonl" >> "$here/cost_model_rows.jsonl"
       sort -u -o "$here/cost_model_rows.jsonl" "$here/cost_model_rows.jsonl" ;;
-    *) echo "PART must be share, n6000, n20000 or calibrate, got '$part'" >&2; exit 2 ;;
+    check)
+      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 2000 --parts 4 8 --seeds 0
+      for k in 2 4 8; do
+        for w in 1 2; do "${T[@]}" --sizes 2000 --seeds 0 --parts $k --workers $w --label "check-parts$k-w$w"; done
+      done
+      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --check "$OUT/rows.jsonl" ;;
+    *) echo "PART must be share, n6000, n20000, calibrate or check, got '$part'" >&2; exit 2 ;;
   esac
   [ -f "$OUT/rows.jsonl" ] || continue
   cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
