@@ -112,10 +112,13 @@ def cut(
             roots.extend((int(children[r, 0]), int(children[r, 1])))
         else:
             final.append(r)
-    centroids = np.empty((len(final), 3))
-    for i, r in enumerate(final):
-        nodes = _subtree_nodes(children, [r])
-        centroids[i] = position[nodes[children[nodes, 0] < 0]].mean(axis=0)
+    if leaves:  # each root a terminal: its own position
+        centroids = position[final]
+    else:
+        centroids = np.empty((len(final), 3))
+        for i, r in enumerate(final):
+            nodes = _subtree_nodes(children, [r])
+            centroids[i] = position[nodes[children[nodes, 0] < 0]].mean(axis=0)
     lo, hi = centroids.min(axis=0), centroids.max(axis=0)
     cells = 1024
     # the cloud fills half of each axis of the curve's grid, placed at ``shift`` along it
@@ -138,19 +141,27 @@ MARGIN_SLACK = 0.5 * np.sqrt(3.0) + 1e-9
 def part_regions(problem: Problem, terminal_position: np.ndarray, terminal_part: np.ndarray) -> np.ndarray:
     """int64 (nz, ny, nx): per supply-grid voxel, the part whose terminals may lie in it, or -1.
 
-    Every tissue voxel belongs to the part of its nearest terminal. A terminal at x covers
-    the voxel centres within ρ (the supply radius, voxels) of x, and x lies within √3/2 of
-    its voxel's centre; so a terminal in a voxel with no voxel of another part within
-    ρ + √3/2 covers only voxels of its own part (:func:`vasc_pipeline.kernel.margins.mark_margins`,
-    which also sees another part across a thin cavity). Such voxels get their part's index,
-    every other voxel -1.
+    Every tissue voxel belongs to the part of the terminal nearest to its block of 2 x 2 x 2
+    voxels (its centre's: eight times fewer lookups than by voxel, for about as many free
+    terminals). A terminal at x covers the voxel centres within ρ (the supply radius,
+    voxels) of x, and x lies within √3/2 of its voxel's centre; so a terminal in a voxel with
+    no voxel of another part within ρ + √3/2 covers only voxels of its own part
+    (:func:`vasc_pipeline.kernel.margins.mark_margins`, which also sees another part across a
+    thin cavity), whatever the partition. Such voxels get their part's index, every other
+    voxel -1.
     """
     t = problem.tissue
     tissue = t.mask != 0
-    centres = np.argwhere(tissue)  # (z, y, x) indices
-    _, nearest = cKDTree(terminal_position).query(t.origin + t.voxel_size * centres[:, ::-1], workers=-1)
+    blocks = np.argwhere(tissue) >> 1  # (z, y, x) index of each tissue voxel's block
+    occupied = np.zeros(tuple((n + 1) // 2 for n in t.shape), dtype=bool)
+    occupied[tuple(blocks.T)] = True
+    block_index = np.argwhere(occupied)
+    centres = t.origin + t.voxel_size * (2 * block_index[:, ::-1] + 0.5)
+    _, nearest = cKDTree(terminal_position).query(centres, workers=-1)
+    block_part = np.zeros(occupied.shape, dtype=np.int64)
+    block_part[tuple(block_index.T)] = terminal_part[nearest]
     region = np.full(t.shape, -1, dtype=np.int64)  # -1: not tissue, no count to share
-    region[tissue] = terminal_part[nearest]
+    region[tissue] = block_part[tuple(blocks.T)]
     near = np.zeros(t.shape, dtype=bool)
     mark_margins(region, problem.model.supply_rho + MARGIN_SLACK, near)
     region[near] = -1

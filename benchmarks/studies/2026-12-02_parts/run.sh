@@ -18,13 +18,16 @@
 #   check     the cost model's check at N = 2000, seed 0: its calibration at K = 4 and 8 (K = 2 is
 #             calibrated by parts_cost_model.py at N = 1000 and 2000), then K = 2, 4, 8 measured on 1
 #             and 2 threads, and the comparison (half an hour; the machine must hold nothing else)
+#   budget    time to quality: K = 2 given more moves than the serial run, seeds 0, 1; N = 2000 at
+#             1.12 and 1.25 times the budget (part_share 0.9 and 0.99) on one thread, then N = 6000
+#             at 1.25 with part_share 0.99 on 2 threads (the machine must hold nothing else)
 # Run with the environment that has vasc_pipeline installed (the script calls `python`).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../../.."
 OUT=${1:-results/studies/parts}
 PARTS=("${@:2}")
-[ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate check)
+[ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate check budget)
 T=(python benchmarks/time_to_quality.py --out "$OUT" --anneal fast)
 for part in "${PARTS[@]}"; do
   case $part in
@@ -48,7 +51,13 @@ for part in "${PARTS[@]}"; do
         for w in 1 2; do "${T[@]}" --sizes 2000 --seeds 0 --parts $k --workers $w --label "check-parts$k-w$w"; done
       done
       python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --check "$OUT/rows.jsonl" ;;
-    *) echo "PART must be share, n6000, n20000, calibrate or check, got '$part'" >&2; exit 2 ;;
+    budget)
+      for b in 1.12 1.25; do "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets $b; done
+      "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets 1.25 \
+        --override anneal.part_share=0.99 --label fast-parts2-w1-share0.99
+      "${T[@]}" --sizes 6000 --seeds 0 1 --parts 2 --workers 2 --budgets 1.25 \
+        --override anneal.part_share=0.99 --label fast-parts2-w2-share0.99 ;;
+    *) echo "PART must be share, n6000, n20000, calibrate, check or budget, got '$part'" >&2; exit 2 ;;
   esac
   [ -f "$OUT/rows.jsonl" ] || continue
   cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
