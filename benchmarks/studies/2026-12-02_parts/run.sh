@@ -20,7 +20,8 @@
 #             and 2 threads, and the comparison (half an hour; the machine must hold nothing else)
 #   budget    time to quality: K = 2 given more moves than the serial run, seeds 0, 1; N = 2000 at
 #             1.12 and 1.25 times the budget (part_share 0.9 and 0.99) on one thread, then N = 6000
-#             at 1.25 with part_share 0.99 on 2 threads (the machine must hold nothing else)
+#             at 1.25 with part_share 0.99 on 2 threads (the machine must hold nothing else); a
+#             third seed at N = 6000, serial and in parts on one thread (costs only)
 # Run with the environment that has vasc_pipeline installed (the script calls `python`).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
@@ -56,7 +57,10 @@ for part in "${PARTS[@]}"; do
       "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets 1.25 \
         --override anneal.part_share=0.99 --label fast-parts2-w1-share0.99
       "${T[@]}" --sizes 6000 --seeds 0 1 --parts 2 --workers 2 --budgets 1.25 \
-        --override anneal.part_share=0.99 --label fast-parts2-w2-share0.99 ;;
+        --override anneal.part_share=0.99 --label fast-parts2-w2-share0.99
+      "${T[@]}" --sizes 6000 --seeds 2 --workers 1
+      "${T[@]}" --sizes 6000 --seeds 2 --parts 2 --workers 1 --budgets 1.25 \
+        --override anneal.part_share=0.99 --label fast-parts2-w1-share0.99 ;;
     *) echo "PART must be share, n6000, n20000, calibrate, check or budget, got '$part'" >&2; exit 2 ;;
   esac
   [ -f "$OUT/rows.jsonl" ] || continue
