@@ -54,13 +54,11 @@ for part in "${PARTS[@]}"; do
       python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --check "$OUT/rows.jsonl" ;;
     budget)
       for b in 1.12 1.25; do "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets $b; done
-      "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets 1.25 \
-        --override anneal.part_share=0.99 --label fast-parts2-w1-share0.99
-      "${T[@]}" --sizes 6000 --seeds 0 1 --parts 2 --workers 2 --budgets 1.25 \
-        --override anneal.part_share=0.99 --label fast-parts2-w2-share0.99
+      more=(--parts 2 --budgets 1.25 --override anneal.part_share=0.99)  # the time-to-quality setting
+      "${T[@]}" "${more[@]}" --sizes 2000 --seeds 0 1 --workers 1 --label fast-parts2-w1-share0.99
+      "${T[@]}" "${more[@]}" --sizes 6000 --seeds 0 1 --workers 2 --label fast-parts2-w2-share0.99
       "${T[@]}" --sizes 6000 --seeds 2 --workers 1
-      "${T[@]}" --sizes 6000 --seeds 2 --parts 2 --workers 1 --budgets 1.25 \
-        --override anneal.part_share=0.99 --label fast-parts2-w1-share0.99 ;;
+      "${T[@]}" "${more[@]}" --sizes 6000 --seeds 2 --workers 1 --label fast-parts2-w1-share0.99 ;;
     *) echo "PART must be share, n6000, n20000, calibrate, check or budget, got '$part'" >&2; exit 2 ;;
   esac
   [ -f "$OUT/rows.jsonl" ] || continue
