@@ -40,7 +40,7 @@ GRID = [
     "anneal.trace_every=10000",
     "cluster.dashboard_address=null",
 ]
-GROUPS = ("morphometry", "asymmetry", "costs", "traces", "kassab", "comparison")
+GROUPS = ("morphometry", "asymmetry", "costs", "anatomy", "traces", "kassab", "comparison")
 
 
 def run_all(out: Path, *overrides: str) -> list[sweep.Job]:
@@ -142,6 +142,7 @@ def test_every_group_opens_with_open_zarr_and_has_units_and_long_names(swept):
         "morphometry": {"n_terminals": 2, "m_b": 2, "scheme": 2},
         "asymmetry": {"n_terminals": 2, "m_b": 2, "scheme": 2},
         "costs": {"n_terminals": 2, "m_b": 2, "seed": 3},
+        "anatomy": {"n_terminals": 2, "m_b": 2, "seed": 3, "inlet": 1},
         "traces": {"n_terminals": 2, "m_b": 2, "seed": 3, "record": 6},
         "kassab": {"artery": 3, "level": 2, "order": 11},
         "comparison": {"n_terminals": 2, "m_b": 2, "artery": 3},
@@ -216,8 +217,10 @@ def test_comparison_table_stored_printed_and_csv(swept, summary):
     assert row.run_id.iloc[0] == str(morph["best_run_id"].sel(point).values)
     summary_csv = pd.read_csv(out / "comparison_summary.csv")
     assert len(summary_csv) == 4 * 3  # cells x arteries
-    # printed: one block per cell with the mean |log10 ratio| line
+    assert {"inlet_share_root", "terminal_pressure_min_Pa", "bifurcations_off_organ_share"} <= set(summary_csv.columns)
+    # printed: one block per cell with the mean |log10 ratio| line and the best tree's anatomy
     assert printed.count("mean |log10 model/Kassab|") == 4
+    assert printed.count("anatomy: terminals") == 4
     assert str(morph["best_run_id"].sel(point).values) in printed
 
 
@@ -238,7 +241,7 @@ def test_figures_exist_and_are_not_blank(swept):
     out, _, result, _ = swept
     assert not result.errors
     names = {p.name for p in result.figures}
-    expected = {"morphometry_vs_kassab.png", "asymmetry.png", "mb_effect.png", "cost_traces.png"}
+    expected = {"morphometry_vs_kassab.png", "asymmetry.png", "mb_effect.png", "cost_traces.png", "anatomy.png"}
     expected |= {"size_scan.png", "agreement_vs_n.png"}  # two N
     expected |= {f"tree_{r.run_id}.png" for r in result.best.values()}
     assert names == expected  # no steps axis: no convergence or consistency figure
@@ -417,6 +420,26 @@ def test_stage_reduce_on_the_command_line(swept, tmp_path):
     # nothing to reduce: a clear error and status 2
     proc = reduce_stage(tmp_path / "x")
     assert proc.returncode == 2 and "nothing to reduce" in proc.stderr
+
+
+def test_anatomy_of_every_run_is_stored_in_csv_and_matches_the_stores(swept, summary):
+    from vasc_pipeline.reduce.anatomy import anatomy_of_store
+
+    out, jobs, result, _ = swept
+    anatomy = summary["anatomy"].to_dataset()
+    frame = pd.read_csv(out / "anatomy.csv")
+    assert len(frame) == len(jobs) == 12 and result.anatomy_csv == out / "anatomy.csv"
+    for j in jobs[:3]:
+        expected = anatomy_of_store(j.store)
+        at = {k: j.coords[k] for k in ("n_terminals", "m_b", "seed")}
+        row = frame[frame.run_id == j.run_id].iloc[0]
+        assert float(anatomy["terminal_pressure_min"].sel(at)) == pytest.approx(expected["terminal_pressure_min"])
+        assert row.terminal_pressure_min_Pa == pytest.approx(expected["terminal_pressure_min"], rel=1e-5)
+        assert float(anatomy["inlet_share"].sel(at).sel(inlet="root")) == 1.0  # one inlet feeds them all
+        assert row.inlet_share_root == 1.0
+    # svZeroDSolver, on every exported network, returns the inlet pressure the terminal pressures imply
+    assert set(result.zero_d_check) == {r.run_id for r in result.best.values()}
+    assert max(result.zero_d_check.values()) < 1e-6
 
 
 def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary):

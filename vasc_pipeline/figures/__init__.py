@@ -21,12 +21,15 @@ Files (each only when the sweep has what it needs):
   every step count, each row with its ``trunk_spread`` (how far apart the seeds' main trunks are).
 - ``size_scan.png`` and ``agreement_vs_n.png`` (two or more N): diameter and length against
   order, one column per N, with Kassab's arteries; mean |log10 model/Kassab| against N.
+- ``anatomy.png``: each inlet's share of the terminals, bifurcations off the organ, terminal
+  pressures and the crowns' scaling exponents, every seed of every cell.
 - ``tree_<run_id>.png``: the best tree of every cell in projection, line width by radius,
   colour by inlet, tissue outline from the mask.
 
 Units in the plots follow Kassab's tables (diameter in um, length in mm); the data stay SI.
 The figures live in :mod:`~vasc_pipeline.figures.orders`, :mod:`~vasc_pipeline.figures.costs` and
-:mod:`~vasc_pipeline.figures.trees`, their shared style in :mod:`~vasc_pipeline.figures.style`.
+:mod:`~vasc_pipeline.figures.trees` and :mod:`~vasc_pipeline.figures.anatomy`, their shared style in
+:mod:`~vasc_pipeline.figures.style`.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from pathlib import Path
 import xarray as xr
 
 from ..store.layout import FIGURES_DIR
+from .anatomy import plot_anatomy
 from .costs import plot_convergence, plot_convergence_studies, plot_cost_traces
 from .orders import plot_asymmetry, plot_mb_effect, plot_morphometry
 from .sizes import plot_agreement, plot_size_scan
@@ -54,6 +58,7 @@ __all__ = [
     "plot_agreement",
     "plot_consistency",
     "plot_tree",
+    "plot_anatomy",
     "REFERENCE_M_B",
 ]
 
@@ -80,6 +85,7 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
         (plot_convergence, "convergence.png"),
         (plot_size_scan, "size_scan.png"),
         (plot_agreement, "agreement_vs_n.png"),
+        (plot_anatomy, "anatomy.png"),
     ):
         p = func(summary, out / name)
         if p is not None:

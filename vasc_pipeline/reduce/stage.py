@@ -11,12 +11,13 @@ cell the complete run with the lowest final annealed cost (``attrs["cost"]["tota
 is the cell's tree (:mod:`vasc_pipeline.reduce.runs`); its morphometry
 (:func:`vasc_pipeline.reduce.morphometry.morphometry`, orders shifted so that the highest is 11) is
 compared with Kassab et al. 1993. The summary's schema is :mod:`vasc_pipeline.reduce.summary`'s;
-this module writes it, derives the comparison tables (``comparison.csv``,
-``comparison_summary.csv`` and the printed table) from it, and calls the exports and figures.
+this module writes it, derives the tables (``comparison.csv``, ``comparison_summary.csv``,
+``anatomy.csv`` and the printed table) from it, and calls the exports and figures.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ import xarray as xr
 
 from ..pipeline.outdir import sweep_in_progress
 from ..store.layout import (
+    ANATOMY_CSV,
     COMPARISON_CSV,
     COMPARISON_SUMMARY_CSV,
     FIGURES_DIR,
@@ -38,6 +40,7 @@ from ..store.layout import (
     run_store_paths,
 )
 from . import morphometry as _m
+from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, MMHG
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .summary import COMPARISON_LEVEL, COMPARISON_SCHEME, build_summary, write_summary
@@ -52,11 +55,13 @@ __all__ = [
     "build_summary",
     "write_summary",
     "comparison_frame",
+    "anatomy_frame",
     "format_comparison",
     "reduce",
     "SUMMARY_NAME",
     "COMPARISON_CSV",
     "COMPARISON_SUMMARY_CSV",
+    "ANATOMY_CSV",
     "COMPARISON_SCHEME",
     "COMPARISON_LEVEL",
 ]
@@ -74,12 +79,15 @@ class Reduction:
     comparison: pd.DataFrame
     comparison_csv: Path
     comparison_summary_csv: Path
+    anatomy_csv: Path
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
     removed: list[Path] = field(default_factory=list)  # superseded tree exports and figures
     skipped: dict[str, str] = field(default_factory=dict)  # store -> why it was not used
     damaged: dict[str, str] = field(default_factory=dict)  # the skipped stores that fail their checks
     errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
+    # run id -> svZeroDSolver's largest relative inlet-pressure deviation on the exported network
+    zero_d_check: dict[str, float] = field(default_factory=dict)
 
 
 def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
@@ -107,6 +115,31 @@ def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
     return frame[front + [c for c in frame.columns if c not in front]].reset_index(drop=True)
 
 
+def anatomy_frame(summary: xr.DataTree) -> pd.DataFrame:
+    """The ``/anatomy`` group as a table, one row per complete run: its cell, seed and run id, each
+    inlet's share of the terminals (``inlet_share_<inlet>``) and the anatomy's fields, their unit
+    in the column name (``terminal_pressure_min_Pa``)."""
+    anatomy = summary["anatomy"].to_dataset()
+    keys = list(summary.attrs["cell_dims"]) + ["seed"]
+    frame = anatomy[[name for name, _, _ in ANATOMY_FIELDS]].to_dataframe().reset_index()
+    frame = frame.rename(columns={name: _with_unit(name, units) for name, units, _ in ANATOMY_FIELDS})
+    shares = anatomy["inlet_share"].to_dataframe().reset_index()
+    shares = shares.pivot(index=keys, columns="inlet", values="inlet_share")
+    shares.columns = [f"inlet_share_{inlet}" for inlet in shares.columns]
+    frame = frame.merge(shares.reset_index(), on=keys)
+    run_ids = summary["costs"]["run_id"].to_dataframe().reset_index()
+    frame = frame.merge(run_ids[keys + ["run_id"]], on=keys)
+    frame = frame[frame.run_id != ""]
+    front = keys + ["run_id"] + list(shares.columns)
+    return frame[front + [c for c in frame.columns if c not in front and c not in ("tissue", "method")]].reset_index(
+        drop=True
+    )
+
+
+def _with_unit(name: str, units: str) -> str:
+    return name if units == "1" else f"{name}_{units}"
+
+
 def _comparison_summary_frame(summary: xr.DataTree) -> pd.DataFrame:
     comp = summary["comparison"].to_dataset()
     names = [
@@ -122,7 +155,9 @@ def _comparison_summary_frame(summary: xr.DataTree) -> pd.DataFrame:
     frame = frame[frame.run_id != ""].drop(
         columns=[c for c in ("tissue", "method") if c in frame.columns and c not in keys]
     )
-    return frame[keys + ["run_id", "artery"] + names].reset_index(drop=True)
+    anatomy = anatomy_frame(summary).drop(columns=keys + ["seed"], errors="ignore")  # the best tree's, by run id
+    frame = frame[keys + ["run_id", "artery"] + names].merge(anatomy, on="run_id", how="left")
+    return frame.reset_index(drop=True)
 
 
 def _write_csv(frame: pd.DataFrame, path: Path) -> Path:
@@ -183,7 +218,26 @@ def format_comparison(summary: xr.DataTree) -> str:
         mal = " ".join(f"{a} {float(c.mean_abs_log10_ratio_length.sel(artery=a)):.3f}" for a in ARTERIES)
         n = int(c.n_orders_compared.isel(artery=0))
         lines.append(f"mean |log10 model/Kassab| over {n} orders: D {mad} | L {mal}")
+        lines.append(_format_anatomy(summary["anatomy"].to_dataset().sel(point), int(morph["best_seed"].sel(point))))
     return "\n".join(lines)
+
+
+def _format_anatomy(anatomy: xr.Dataset, seed: int) -> str:
+    """One line of the best tree's anatomy (:mod:`vasc_pipeline.reduce.anatomy`) for the console table."""
+    a = anatomy.sel(seed=seed)
+    pairs = zip(a.inlet.values, a.inlet_share.values)
+    shares = " ".join(f"{str(i)} {float(v):.0%}" for i, v in pairs if np.isfinite(v))
+    off = float(a.bifurcations_off_organ_share)
+    hk = HUO_KASSAB_EXPONENTS
+    return (
+        f"anatomy: terminals {shares} | bifurcations > 2 mm off the organ "
+        + (f"{off:.1%}" if np.isfinite(off) else "-")
+        + f" | terminal pressure min {float(a.terminal_pressure_min) / MMHG:.0f}, median "
+        f"{float(a.terminal_pressure_median) / MMHG:.0f} mmHg, mean drop {float(a.pressure_drop_mean) / MMHG:.0f} mmHg "
+        f"({int(a.terminals_below_zero)} below 0) | crowns D_s ~ L_c^{float(a.diameter_crown_length_exponent):.2f} "
+        f"({hk['diameter_crown_length']:.2f}), V_c ~ D_s^{float(a.crown_volume_diameter_exponent):.2f} "
+        f"({hk['crown_volume_diameter']:g})"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -267,8 +321,9 @@ def reduce(
     frame = comparison_frame(summary)
     csv = _write_csv(frame, out / COMPARISON_CSV)
     csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+    csv_anatomy = _write_csv(anatomy_frame(summary), out / ANATOMY_CSV)
     result = Reduction(
-        out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped, damaged=damaged
+        out, summary, summary_path, best, dims, frame, csv, csv_summary, csv_anatomy, skipped=skipped, damaged=damaged
     )
     stream.write(format_comparison(summary) + "\n")
     result.removed = remove_superseded_outputs(out, best)
@@ -279,7 +334,11 @@ def reduce(
         try:
             for r in best.values():
                 result.trees.extend(export_run(r.path, out / TREES_DIR))
-                result.trees.append(zerod.export_run(r.path, out / TREES_DIR))  # the svZeroDSolver network
+                network = zerod.export_run(r.path, out / TREES_DIR)  # the svZeroDSolver network
+                result.trees.append(network)
+                deviation = zerod.solver_check(json.loads(network.read_text()), r.physics["pressure_inlet"])
+                if deviation is not None:
+                    result.zero_d_check[r.run_id] = deviation
         except Exception as exc:  # an export problem must not hide the summary already written
             result.errors["exports"] = f"{type(exc).__name__}: {exc}"
     if figures:
@@ -292,11 +351,17 @@ def reduce(
     lines = [
         f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
         f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
-        f"  comparison: {csv}, {csv_summary}",
+        f"  comparison: {csv}, {csv_summary}; anatomy: {csv_anatomy}",
     ]
     if result.trees:
         lines.append(
             f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv, .0d.json for svZeroDSolver)"
+        )
+    if result.zero_d_check:
+        worst = max(result.zero_d_check.values())
+        lines.append(
+            f"  0D check: svZeroDSolver on the exported networks gives the inlet pressure to {worst:.1e} (relative): "
+            "the terminal pressures above are the networks' own"
         )
     if result.figures:
         lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")

@@ -19,6 +19,9 @@ anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
 - ``/costs``        (cell..., seed): final costs (annealed total and every unscaled term),
   steps, wall time and run id of every complete run; ``is_best``; ``cavity_share`` (the
   heart: share of the large vessels' length inside the ventricular cavities).
+- ``/anatomy``      (cell..., seed) and (cell..., seed, inlet): what a physiologist looks at
+  first in every complete run (:mod:`vasc_pipeline.reduce.anatomy`): each inlet's share of the
+  terminals, bifurcations off the organ, terminal pressures, the crowns' scaling exponents.
 - ``/traces``       (cell..., seed, record): the cost traces of all complete runs,
   NaN-padded to the longest.
 - ``/kassab``       (artery, level, order): :func:`vasc_pipeline.reduce.reference.kassab_dataset`.
@@ -44,6 +47,7 @@ import xarray as xr
 
 from ..store.run_store import TRACE_FIELDS, RunStore, file_lock
 from . import morphometry as _m
+from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, anatomy_of_store
 from .reference import ARTERIES, kassab_dataset
 from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
 from .similarity import main_trunks, tortuosity, trunk_spread
@@ -60,6 +64,7 @@ _COST_META = {
     "exclusion": _TRACE_META["exclusion"],
     "pressure": _TRACE_META["pressure"],
 }
+_CELL_GROUPS = ("/morphometry", "/asymmetry", "/costs", "/anatomy", "/traces", "/comparison")
 _CELL_META = {
     "tissue": {"long_name": "tissue"},
     "method": {"long_name": "how the tree was grown (anneal, cco)"},
@@ -311,6 +316,7 @@ def build_summary(
         level=COMPARISON_LEVEL,
     )
     costs = _costs(runs, best, dims, cell_coords)
+    anatomy = _anatomy(runs, dims, cell_coords)
     traces = _traces(runs, dims, cell_coords)
     kassab = _strings_as_objects(reference)
 
@@ -334,16 +340,17 @@ def build_summary(
         "/morphometry": morphometry,
         "/asymmetry": asymmetry,
         "/costs": costs,
+        "/anatomy": anatomy,
         "/traces": traces,
         "/kassab": kassab,
         "/comparison": comparison,
     }
     if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
-        for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
+        for name in _CELL_GROUPS:
             groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
     if "method" not in dims:  # one method: likewise
         method = runs[0].method
-        for name in ("/morphometry", "/asymmetry", "/costs", "/traces", "/comparison"):
+        for name in _CELL_GROUPS:
             groups[name] = groups[name].assign_coords(method=((), method, _CELL_META["method"]))
     for ds in groups.values():
         _strings_as_objects(ds, inplace=True)
@@ -364,11 +371,18 @@ def _strings_as_objects(ds: xr.Dataset, inplace: bool = False) -> xr.Dataset:
     return ds
 
 
-def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
+def _seed_grid(runs, dims, cell_coords) -> tuple[list[int], dict, dict]:
+    """The (cell..., seed) grid of every run: its shape, each run's index in it (by path) and its coordinates."""
     seeds = sorted({r.seed for r in runs})
-    shape = [len(cell_coords[d]) for d in dims] + [len(seeds)]
     index = {d: {v: i for i, v in enumerate(cell_coords[d])} for d in dims}
-    sindex = {s: i for i, s in enumerate(seeds)}
+    at = {r.path: tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (seeds.index(r.seed),) for r in runs}
+    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
+    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
+    return [len(cell_coords[d]) for d in dims] + [len(seeds)], at, coords
+
+
+def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
+    shape, where, coords = _seed_grid(runs, dims, cell_coords)
     values = {k: np.full(shape, np.nan) for k in COST_KEYS}
     steps_done = np.zeros(shape, dtype=np.int64)
     wall = np.full(shape, np.nan)
@@ -376,7 +390,7 @@ def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
     is_best = np.zeros(shape, dtype=np.int8)
     cavity = np.full(shape, np.nan)
     for r in runs:
-        at = tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (sindex[r.seed],)
+        at = where[r.path]
         for k in COST_KEYS:
             values[k][at] = r.cost[k]
         cavity[at] = r.statistics.get("cavity_share", np.nan)
@@ -407,25 +421,51 @@ def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
             "(NaN: no cavity, e.g. not the heart)",
         },
     )
-    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
-    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
     return xr.Dataset(data, coords=coords, attrs={"title": "Final costs of every complete run"})
 
 
+def _anatomy(runs, dims, cell_coords) -> xr.Dataset:
+    """Every complete run's :func:`~vasc_pipeline.reduce.anatomy.anatomy`, on (cell..., seed) and,
+    for the inlet shares, (cell..., seed, inlet)."""
+    shape, where, coords = _seed_grid(runs, dims, cell_coords)
+    found = {r.path: anatomy_of_store(r.path) for r in runs}
+    prefix = "inlet_share_"
+    inlets = sorted({k[len(prefix) :] for a in found.values() for k in a if k.startswith(prefix)})
+    values = {name: np.full(shape, np.nan) for name, _, _ in ANATOMY_FIELDS}
+    shares = np.full(shape + [len(inlets)], np.nan)
+    for r in runs:
+        at = where[r.path]
+        for name in values:
+            values[name][at] = found[r.path][name]
+        for j, inlet in enumerate(inlets):
+            shares[at + (j,)] = found[r.path].get(prefix + inlet, np.nan)
+    full = dims + ["seed"]
+    data = {name: (full, values[name], {"units": u, "long_name": ln}) for name, u, ln in ANATOMY_FIELDS}
+    share_attrs = {"units": "1", "long_name": "share of the terminals fed by the inlet"}
+    data["inlet_share"] = (full + ["inlet"], shares, share_attrs)
+    coords["inlet"] = ("inlet", np.array(inlets, dtype=object), {"long_name": "inlet (ostium) name"})
+    return xr.Dataset(
+        data,
+        coords=coords,
+        attrs={
+            "title": "Anatomy of every complete run: arteries, vessels on the organ, pressures, crown scaling",
+            **{f"huo_kassab_{k}": v for k, v in HUO_KASSAB_EXPONENTS.items()},
+        },
+    )
+
+
 def _traces(runs, dims, cell_coords) -> xr.Dataset:
-    seeds = sorted({r.seed for r in runs})
+    grid, where, coords = _seed_grid(runs, dims, cell_coords)
     traces = {r.run_id: RunStore.open(r.path, mode="r").read_trace() for r in runs}
     n_rec = max((len(t["step"]) for t in traces.values()), default=0)
-    shape = [len(cell_coords[d]) for d in dims] + [len(seeds), n_rec]
-    index = {d: {v: i for i, v in enumerate(cell_coords[d])} for d in dims}
-    sindex = {s: i for i, s in enumerate(seeds)}
+    shape = grid + [n_rec]
     names = [f[0] for f in TRACE_FIELDS]
     # step as float64 with NaN padding: exact for step counts below 2^53, and plots need no mask
     arrays = {n: np.full(shape, np.nan) for n in names}
     length = np.zeros(shape[:-1], dtype=np.int64)
     for r in runs:
         t = traces[r.run_id]
-        at = tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (sindex[r.seed],)
+        at = where[r.path]
         k = len(t["step"])
         length[at] = k
         for n in names:
@@ -437,8 +477,6 @@ def _traces(runs, dims, cell_coords) -> xr.Dataset:
         length,
         {"units": "1", "long_name": "trace records of the run (0: no run)"},
     )
-    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
-    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
     coords["record"] = ("record", np.arange(n_rec, dtype=np.int64), {"units": "1", "long_name": "trace record"})
     return xr.Dataset(data, coords=coords, attrs={"title": "Cost traces of every complete run (NaN-padded)"})
 

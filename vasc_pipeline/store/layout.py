@@ -28,6 +28,7 @@ __all__ = [
     "SUMMARY_NAME",
     "COMPARISON_CSV",
     "COMPARISON_SUMMARY_CSV",
+    "ANATOMY_CSV",
     "TREES_DIR",
     "FIGURES_DIR",
     "cell_id",
@@ -43,6 +44,7 @@ RUNS_DIR = "runs"
 SUMMARY_NAME = "summary.zarr"
 COMPARISON_CSV = "comparison.csv"
 COMPARISON_SUMMARY_CSV = "comparison_summary.csv"
+ANATOMY_CSV = "anatomy.csv"
 TREES_DIR = "trees"
 FIGURES_DIR = "figures"
 

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Levers of a physiological coronary model, measured alone and combined on the heart under
+# today's `fast` schedule, N = 1000 and 2000, seeds 0 and 1 (the paper's model, read literally,
+# is the baseline: its size-scan stores are scored as they are, nothing re-run).
+#
+#   reach0     bifurcations on or in the heart (tissue.bifurcation_reach=0)
+#   cut04      vessels under 0.4 mm diameter run in the myocardium (physics.r_cutoff=2e-4)
+#   g73        the Huo-Kassab flow-diameter law D ~ Q^(3/7) (physics.gamma=7/3)
+#   A          reach0 + cut04 + g73, the split between the arteries free
+#   A_share    A with the pig's split fixed (tissue.inlet_share=[0.62,0.38], nearest start)
+#   A_near     A, free split, each ostium starting with its nearest terminals
+#   A_cco      A from a CCO tree (anneal.init=cco), free split
+#   A_cut02    A with the intramural cutoff at 0.2 mm diameter
+#   A_cut08    A with the intramural cutoff at 0.8 mm diameter
+#
+# Resumable: every run is a checkpointed pipeline job; rerun the same command to continue.
+# Rows of finished runs land in OUT/rows.jsonl and are merged into rows.jsonl beside this
+# script after each part; score.py adds the anatomy of every store (inlet shares, bifurcations
+# off the heart, terminal pressures, Huo-Kassab exponents) into anatomy.jsonl.
+#
+#     bash studies/2026-12-06_model_levers/run.sh [OUT [LEVER ...]]
+#
+# OUT defaults to results/studies/model_levers (run stores stay out of git); LEVER defaults to
+# every lever above, in order. One job at a time (--workers 1): start a second copy with other
+# levers to use both cores.
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+cd "$here/../.."
+OUT=${1:-results/studies/model_levers}
+LEVERS=("${@:2}")
+[ ${#LEVERS[@]} -gt 0 ] || LEVERS=(A A_share A_cco A_near g73 reach0 cut04 A_cut02 A_cut08)
+REACH0=(--override tissue.bifurcation_reach=0)
+G73=(--override physics.gamma=2.3333333333333335)
+SHARE=(--override "tissue.inlet_share=[0.62,0.38]" --override tissue.inlet_assignment=nearest)
+cut() { echo --override "physics.r_cutoff=$1"; }
+for lever in "${LEVERS[@]}"; do
+  case $lever in
+    reach0) o=("${REACH0[@]}") ;;
+    cut04) o=($(cut 2e-4)) ;;
+    g73) o=("${G73[@]}") ;;
+    A) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4)) ;;
+    A_share) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) "${SHARE[@]}") ;;
+    A_near) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) --override tissue.inlet_assignment=nearest) ;;
+    A_cco) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) --override anneal.init=cco) ;;
+    A_cut02) o=("${REACH0[@]}" "${G73[@]}" $(cut 1e-4)) ;;
+    A_cut08) o=("${REACH0[@]}" "${G73[@]}" $(cut 4e-4)) ;;
+    *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08, got '$lever'" >&2; exit 2 ;;
+  esac
+  python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
+    --label "$lever" "${o[@]}"
+  touch "$here/rows.jsonl"
+  # two copies may merge at once: one at a time
+  flock "$here/rows.jsonl" sh -c "cat '$OUT/rows.jsonl' >> '$here/rows.jsonl' && sort -u -o '$here/rows.jsonl' '$here/rows.jsonl'"
+done
