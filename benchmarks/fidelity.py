@@ -37,13 +37,14 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from time_to_quality import ARTERIES, jobs_for, morphometry_row, run_one, seed_groups, seed_stats
+from time_to_quality import ARTERIES, jobs_for, run_one, seed_groups, seed_stats
 
+from vasc_pipeline.reduce.anatomy import inlet_shares
 from vasc_pipeline.reduce.fidelity import (
     KASSAB_TOP_ORDER,
     diameter_ratio_per_order,
-    inlet_shares,
     kassab_diameter_ratio,
+    morphometry_errors,
     per_artery_trees,
 )
 
@@ -125,9 +126,9 @@ def row_of(path: Path, root: Path) -> dict:
     row["n_contracted_segments"] = int(morph.attrs["n_contracted_segments"])
     row["min_segment_length"] = float(morph.attrs["min_segment_length"])  # m; rows before 2026-11-24: 1e-9
     row["diameter_ratio_per_order"] = diameter_ratio_per_order(orders, dds.element_diameter_mean.values[present])
-    row.update(morphometry_row(morph))
+    row.update(morphometry_errors(morph))
     # the other reading of Jiang's reassignment (vasc_pipeline.reduce.ordering): orders monotone toward the root
-    confluence = morphometry_row(
+    confluence = morphometry_errors(
         morphometry.morphometry(parent, tree["position"], tree["radius"], kind, reading="confluence")
     )
     row["n_orders_confluence"] = confluence["n_orders"]

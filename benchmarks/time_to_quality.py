@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vasc_pipeline.reduce.fidelity import inlet_shares, terminal_aligned
+from vasc_pipeline.reduce.fidelity import run_row
 from vasc_pipeline.reduce.reference import ARTERIES
 
 DEFAULT_SIZES = [500, 1000, 2000]
@@ -98,64 +98,10 @@ def run_in_parts(j, workers: int) -> str:
     return j.store
 
 
-def morphometry_row(morph) -> dict:
-    """The morphometry part of a row: ``n_orders``, per order what the errors are made of, and
-    the errors against Kassab under both alignments (trunk = 11, terminal order aligned)."""
-    from vasc_pipeline import morphometry
-
-    dds = morph.sel(scheme="diameter_defined")
-    present = dds["element_count"] > 0
-    row = {"n_orders": int(present.sum())}
-    row["orders"] = {  # per order (trunk = 11): what the errors are made of
-        int(o): {
-            "elements": int(dds["element_count"].sel(order=o)),
-            "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
-            "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
-            "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3,
-        }
-        for o in dds.order.values[present.values]
-    }
-    realigned, row["terminal_aligned_shift"] = terminal_aligned(morph)
-    for artery in ARTERIES:
-        for suffix, ds in (("", morph), ("_terminal_aligned", realigned)):
-            table = morphometry.compare_with_kassab(ds, artery)
-            row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
-            row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
-    return row
-
-
 def row_of(store_path: str, schedule: str, budget: float) -> dict:
-    """The benchmark's row of a complete run store."""
-    from vasc_pipeline import morphometry
-    from vasc_pipeline.model.costs import vascular_exclusion_cost
-    from vasc_pipeline.store import RunStore
-
-    store = RunStore.open(store_path, mode="r")
-    a = store.attrs
-    c = a["cost_recomputed"]
-    w_o = a["physics"]["A_o"] / a["physics"]["A_wv"]
-    row = {
-        "n_terminals": int(a["coords"]["n_terminals"]),
-        "anneal": schedule,
-        "budget": budget,
-        "steps": int(a["steps_done"]),
-        "seed": int(a["seed"]),
-        "wall_seconds": float(a["wall_seconds"]),
-        "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
-        "cost_supply": float(c["supply"]),
-        "cost_vascular": float(vascular_exclusion_cost(c, w_o)),
-        "cost_volume": float(c["volume"]),  # C_v, W
-        "cost_power": float(c["power"]),  # C_w, W
-        "cost_exclusion_weighted": float(w_o * c["exclusion"]),  # (A_o/A_wv) C_o, W
-        "cost_total": float(c["total"]),
-        "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
-    }
-    tree = store.read_tree()
-    for name, share in inlet_shares(tree["parent"], tree["kind"], store.group["tissue"].attrs["inlet_names"]).items():
-        row[f"terminal_share_{name}"] = share  # ~0: an abandoned artery
-    row.update(morphometry_row(morphometry.morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
-    row["store"] = store_path
-    return row
+    """The benchmark's row of a complete run store (:func:`vasc_pipeline.reduce.fidelity.run_row`)."""
+    row = run_row(store_path)
+    return {"n_terminals": row.pop("n_terminals"), "anneal": schedule, "budget": budget, **row}
 
 
 SUMMARY_FIELDS = [  # what summarise averages over seeds

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from vasc_pipeline.reduce import fidelity
+from vasc_pipeline.reduce import anatomy, fidelity
 from vasc_pipeline.reduce.reference import kassab_dataset
 
 # Two inlets (LCA 0, RCA 1). The LCA's left main (0 -> 6) splits at 6 into a wide branch 7
@@ -20,7 +20,7 @@ TREE = {"parent": PARENT, "position": POSITION * 1e-3, "radius": RADIUS, "kind":
 
 
 def test_inlet_shares_count_the_terminals_of_each_inlet():
-    assert fidelity.inlet_shares(PARENT, KIND, ("LCA", "RCA")) == {"LCA": 0.8, "RCA": 0.2}
+    assert anatomy.inlet_shares(PARENT, KIND, ("LCA", "RCA")) == {"LCA": 0.8, "RCA": 0.2}
 
 
 def test_a_subtree_gets_an_inlet_at_its_head_s_parent():

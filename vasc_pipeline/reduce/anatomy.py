@@ -31,8 +31,14 @@ from scipy import ndimage
 
 from ..model.costs import node_pressures
 from ..model.physics import Physics
-from ..model.topology import KIND_BIFURCATION, segment_lengths, terminals_downstream, topological_order
-from .fidelity import inlet_shares
+from ..model.topology import (
+    KIND_BIFURCATION,
+    KIND_TERMINAL,
+    inlet_of,
+    segment_lengths,
+    terminals_downstream,
+    topological_order,
+)
 from .zerod import tree_from_arrays
 
 __all__ = [
@@ -44,6 +50,7 @@ __all__ = [
     "anatomy_of_store",
     "crown_exponents",
     "distance_outside",
+    "inlet_shares",
     "terminal_pressures",
 ]
 
@@ -64,6 +71,13 @@ ANATOMY_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("diameter_crown_length_exponent", "1", "fitted exponent of D_s ~ L_c^b (Huo-Kassab: 3/7)"),
     ("crown_volume_diameter_exponent", "1", "fitted exponent of V_c ~ D_s^b (Huo-Kassab: 3)"),
 )
+
+
+def inlet_shares(parent, kind, inlet_names) -> dict[str, float]:
+    """Per inlet (in node order, named by ``inlet_names``) its share of the terminals."""
+    parent, kind = np.asarray(parent), np.asarray(kind)
+    terminals = inlet_of(parent)[kind == KIND_TERMINAL]
+    return {name: float(np.mean(terminals == inlet)) for name, inlet in zip(inlet_names, np.flatnonzero(parent < 0))}
 
 
 def terminal_pressures(parent: np.ndarray, position: np.ndarray, physics: Physics) -> np.ndarray:

@@ -6,10 +6,12 @@ benchmarks (``benchmarks/time_to_quality.py``, ``benchmarks/fidelity.py``):
 
 - :func:`terminal_aligned`: the orders shifted so that the lowest one sits on Kassab's order of
   nearest mean element diameter, instead of the trunk on order 11;
-- :func:`inlet_shares`: each inlet's share of the terminals (near 0: an abandoned artery);
 - :func:`per_artery_trees`: RCA, LAD and LCX as trees of their own, as Kassab ordered them;
 - :func:`diameter_ratio_per_order` and :func:`kassab_diameter_ratio`: the element diameter's
-  growth per order (Kassab's LAD, orders 5-11: 1.86).
+  growth per order (Kassab's LAD, orders 5-11: 1.86);
+- :func:`morphometry_errors` and :func:`run_row`: a run store scored in one flat row (costs,
+  each inlet's share, the errors against Kassab under both alignments, the anatomy), the row
+  of the benchmarks and studies.
 """
 
 from __future__ import annotations
@@ -17,18 +19,20 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..model.topology import KIND_TERMINAL, contract_short_segments, inlet_of
-from .reference import kassab_dataset
+from ..model.topology import contract_short_segments, inlet_of
+from .anatomy import anatomy_of_store, inlet_shares
+from .reference import ARTERIES, kassab_dataset
 
 __all__ = [
     "KASSAB_FIT_ORDERS",
     "KASSAB_TOP_ORDER",
     "terminal_aligned",
-    "inlet_shares",
     "subtree",
     "per_artery_trees",
     "diameter_ratio_per_order",
     "kassab_diameter_ratio",
+    "morphometry_errors",
+    "run_row",
 ]
 
 KASSAB_FIT_ORDERS = slice(4, 11)  # orders 5-11: the range our trees span at N <= 6000
@@ -44,13 +48,6 @@ def terminal_aligned(morph: xr.Dataset) -> tuple[xr.Dataset, int]:
     d_low = float(dds.element_diameter_mean.sel(order=lowest))
     shift = int(lad.order.values[np.nanargmin(np.abs(np.log10(lad.D_mean.values / d_low)))]) - lowest
     return morph.assign_coords(order=morph.order + shift), shift
-
-
-def inlet_shares(parent, kind, inlet_names) -> dict[str, float]:
-    """Per inlet (in node order, named by ``inlet_names``) its share of the terminals."""
-    parent, kind = np.asarray(parent), np.asarray(kind)
-    terminals = inlet_of(parent)[kind == KIND_TERMINAL]
-    return {name: float(np.mean(terminals == inlet)) for name, inlet in zip(inlet_names, np.flatnonzero(parent < 0))}
 
 
 def subtree(tree: dict, head: int) -> dict:
@@ -102,3 +99,66 @@ def kassab_diameter_ratio() -> float:
     """:func:`diameter_ratio_per_order` of Kassab's LAD elements over :data:`KASSAB_FIT_ORDERS`."""
     lad = kassab_dataset().sel(artery="LAD", level="element")
     return diameter_ratio_per_order(lad.order.values[KASSAB_FIT_ORDERS], lad.D_mean.values[KASSAB_FIT_ORDERS])
+
+
+def morphometry_errors(morph: xr.Dataset) -> dict:
+    """The morphometry part of a row: ``n_orders``, per order what the errors are made of, and
+    ``diameter_error[_terminal_aligned]_<artery>`` / ``length_error...`` (mean |log10 model/Kassab|,
+    element level) with the trunk on order 11 and with the terminal order aligned."""
+    from .morphometry import compare_with_kassab
+
+    dds = morph.sel(scheme="diameter_defined")
+    present = dds["element_count"] > 0
+    row = {"n_orders": int(present.sum())}
+    row["orders"] = {  # per order (trunk = 11): what the errors are made of
+        int(o): {
+            "elements": int(dds["element_count"].sel(order=o)),
+            "segments_per_element": float(dds["segment_count"].sel(order=o) / dds["element_count"].sel(order=o)),
+            "diameter_um": float(dds["element_diameter_mean"].sel(order=o)) * 1e6,
+            "length_mm": float(dds["element_length_mean"].sel(order=o)) * 1e3,
+        }
+        for o in dds.order.values[present.values]
+    }
+    realigned, row["terminal_aligned_shift"] = terminal_aligned(morph)
+    for artery in ARTERIES:
+        for suffix, ds in (("", morph), ("_terminal_aligned", realigned)):
+            table = compare_with_kassab(ds, artery)
+            row[f"diameter_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_diameter"]
+            row[f"length_error{suffix}_{artery}"] = table.attrs["mean_abs_log10_ratio_length"]
+    return row
+
+
+def run_row(store_path) -> dict:
+    """A complete run store scored in one flat row: N, steps, seed, wall time, the costs (C_s;
+    ``cost_vascular`` = C_v + C_w + (A_o/A_wv) C_o and its parts, W), ``cavity_share``,
+    ``terminal_share_<inlet>``, :func:`morphometry_errors` and the anatomy
+    (:func:`vasc_pipeline.reduce.anatomy.anatomy`, SI units), and the store's path."""
+    from ..model.costs import vascular_exclusion_cost
+    from ..store.run_store import RunStore
+    from .morphometry import morphometry
+
+    store = RunStore.open(store_path, mode="r")
+    a = store.attrs
+    c = a["cost_recomputed"]
+    w_o = a["physics"]["A_o"] / a["physics"]["A_wv"]
+    row = {
+        "n_terminals": int(a["coords"]["n_terminals"]),
+        "steps": int(a["steps_done"]),
+        "seed": int(a["seed"]),
+        "wall_seconds": float(a["wall_seconds"]),
+        "moves_per_second": float(a["steps_done"]) / float(a["wall_seconds"]),
+        "cost_supply": float(c["supply"]),
+        "cost_vascular": float(vascular_exclusion_cost(c, w_o)),
+        "cost_volume": float(c["volume"]),  # C_v, W
+        "cost_power": float(c["power"]),  # C_w, W
+        "cost_exclusion_weighted": float(w_o * c["exclusion"]),  # (A_o/A_wv) C_o, W
+        "cost_total": float(c["total"]),
+        "cavity_share": float((a.get("statistics") or {}).get("cavity_share", float("nan"))),
+    }
+    tree = store.read_tree()
+    for name, share in inlet_shares(tree["parent"], tree["kind"], store.group["tissue"].attrs["inlet_names"]).items():
+        row[f"terminal_share_{name}"] = share  # ~0: an abandoned artery
+    row.update(morphometry_errors(morphometry(tree["parent"], tree["position"], tree["radius"], tree["kind"])))
+    row.update({k: v for k, v in anatomy_of_store(store_path).items() if not k.startswith("inlet_share_")})
+    row["store"] = str(store_path)
+    return row
