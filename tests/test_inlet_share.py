@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from helpers import assert_running_equals_full, make_problem
@@ -95,3 +97,45 @@ def test_nearest_assignment_gives_each_inlet_its_side_of_the_heart(share):
 def test_an_unknown_inlet_assignment_is_refused_naming_the_field():
     with pytest.raises(ConfigError, match=r"tissue\.inlet_assignment must be one of random, nearest, got 'closest'"):
         make_problem("n_terminals=20", "tissue.inlet_assignment=closest")
+
+
+def test_a_share_band_keeps_every_inlet_inside_it_and_lets_the_trees_trade_subtrees():
+    overrides = ["n_terminals=60", "anneal.steps=300000", "anneal.polish=false", "tissue.inlet_share=[0.5,0.5]"]
+    problem = make_problem(*overrides, "tissue.inlet_share_tolerance=0.2")
+    assert problem.model.inlet_count_bounds.tolist() == [[18, 42], [18, 42]]
+    state = engine.initial_state(problem, 3)
+    seen = set()
+    for _ in range(30):
+        engine.run_block(problem, state, 10_000)
+        counts = terminals_per_inlet(problem, state)
+        assert all(18 <= c <= 42 for c in counts), counts
+        seen.add(tuple(counts))
+    assert len(seen) > 1  # subtrees of unequal size do cross between the inlet trees
+    assert_running_equals_full(problem, state)
+
+
+def test_a_band_of_zero_width_is_the_fixed_share_bit_for_bit():
+    problem = make_problem("n_terminals=60", "anneal.steps=200000", "tissue.inlet_share=[0.7,0.3]")
+    counts = inlet_counts([0.7, 0.3], 60)
+    banded = dataclasses.replace(
+        problem,
+        model=problem.model._replace(fixed_inlet_counts=False, inlet_count_bounds=np.stack([counts, counts], axis=1)),
+    )
+    fixed_state, banded_state = engine.initial_state(problem, 5), engine.initial_state(banded, 5)
+    engine.run_block(problem, fixed_state, 200_000)
+    engine.run_block(banded, banded_state, 200_000)
+    np.testing.assert_array_equal(fixed_state.parent, banded_state.parent)
+    np.testing.assert_array_equal(fixed_state.position, banded_state.position)
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["tissue.inlet_share_tolerance=0.1"], "set the share too"),
+        (["tissue.inlet_share=[0.6,0.4]", "tissue.inlet_share_tolerance=1.5"], r"must lie in \(0, 1\)"),
+        (["tissue.inlet_share=[0.6,0.4]", "tissue.inlet_share_tolerance=0"], r"must lie in \(0, 1\)"),
+    ],
+)
+def test_bad_tolerances_are_refused_naming_the_field(overrides, message):
+    with pytest.raises(ConfigError, match=r"tissue.inlet_share_tolerance.*" + message):
+        make_problem("n_terminals=20", *overrides)

@@ -76,6 +76,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclusion_path": None,
     "tissue.exclusion_array": None,
     "tissue.inlet_share": None,
+    "tissue.inlet_share_tolerance": None,
     "tissue.inlet_assignment": "random",
     "tissue.bifurcation_reach": None,
     "tissue.ostium_height": None,
@@ -108,6 +109,7 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "q_required",
     "exclusion_voxel_size",
     "inlet_share",
+    "inlet_share_tolerance",
     "inlet_assignment",
     "bifurcation_reach",
 )
@@ -155,6 +157,9 @@ class TissueConfig(Settings):
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
+    # With inlet_share: how far each inlet's share may stray from it (0.1: 0.62 +- 0.1), the inlet
+    # trees trading subtrees freely inside the band; None: kept exactly.
+    inlet_share_tolerance: Optional[float] = None
     # Which terminals of the initial tree each inlet feeds: "random" (the paper's), or
     # "nearest" (by distance to the inlets, keeping inlet_share's counts when it is set).
     inlet_assignment: str = "random"
@@ -405,6 +410,15 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "tissue.inlet_share fixes the terminals of every inlet, which the CCO growth (method=cco, "
                 "anneal.init=cco) assigns by connection: leave it unset (null) there"
             )
+    tolerance = cfg.tissue.inlet_share_tolerance
+    if tolerance is not None:
+        if share is None:
+            raise ConfigError(
+                "tissue.inlet_share_tolerance is a band around tissue.inlet_share: set the share too (heart: "
+                f"tissue.inlet_share=[0.62,0.38]), or leave the tolerance null; got {tolerance}"
+            )
+        if not 0.0 < tolerance < 1.0:
+            raise ConfigError(f"tissue.inlet_share_tolerance must lie in (0, 1) (a share's +-), got {tolerance}")
     reach = cfg.tissue.bifurcation_reach
     if reach is not None:
         if not (reach >= 0 and math.isfinite(reach)):

@@ -127,8 +127,8 @@ def descend_swaps(problem, state: kernel.State, max_rounds: int = 20) -> int:
             for b in range(a + 1, parent.size):
                 if parent[a] == parent[b] or b in ancestors_a or a in _ancestors(parent, b):
                     continue
-                if model.fixed_inlet_counts and inlet[a] != inlet[b] and tree.n_downstream[a] != tree.n_downstream[b]:
-                    continue  # tissue.inlet_share, as in the kernel's swap
+                if inlet[a] != inlet[b] and not _keeps_inlet_bounds(model, tree.n_downstream, inlet, a, b):
+                    continue  # tissue.inlet_share (and its tolerance), as in the kernel's swap
                 trial = parent.copy()
                 trial[a], trial[b] = parent[b], parent[a]
                 t = Tree(trial, children_from_parent(trial), tree.position.copy(), count_terminals(trial, n, k), k)
@@ -150,6 +150,22 @@ def descend_swaps(problem, state: kernel.State, max_rounds: int = 20) -> int:
         if not improved:
             break
     return applied
+
+
+def _keeps_inlet_bounds(model, n_downstream: np.ndarray, inlet: np.ndarray, a: int, b: int) -> bool:
+    """Whether swapping a and b (in different inlet trees) keeps every inlet's terminal count
+    as ``tissue.inlet_share`` asks: exactly, or within ``inlet_share_tolerance``'s bounds."""
+    moved = n_downstream[a] - n_downstream[b]  # from a's inlet tree to b's
+    if moved == 0:
+        return True
+    if model.fixed_inlet_counts:
+        return False
+    bounds = model.inlet_count_bounds
+    if bounds.shape[0] == 0:
+        return True
+    ia, ib = inlet[a], inlet[b]
+    new_a, new_b = n_downstream[ia] - moved, n_downstream[ib] + moved
+    return bool(bounds[ia, 0] <= new_a <= bounds[ia, 1] and bounds[ib, 0] <= new_b <= bounds[ib, 1])
 
 
 def _ancestors(parent: np.ndarray, i: int) -> set[int]:

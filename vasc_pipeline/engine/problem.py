@@ -21,7 +21,14 @@ from ..model.costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, t
 from ..model.physics import Physics, cost_tables, supply_radius
 from ..model.rng import seed_state
 from ..model.tissue import Tissue, TissueError, build_tissue
-from ..model.tree import Tree, TreeError, check_duplicate_sites, load_terminal_sites, random_tree
+from ..model.tree import (
+    Tree,
+    TreeError,
+    check_duplicate_sites,
+    inlet_count_bounds,
+    load_terminal_sites,
+    random_tree,
+)
 
 __all__ = [
     "Problem",
@@ -196,7 +203,8 @@ def build_problem(config: Any) -> Problem:
         supply_shell_width=kernel.SHELL_WIDTH,
         prefetch_lead=kernel.PREFETCH_LEAD,
         prefetch_supply=True,
-        fixed_inlet_counts=cfg.tissue.inlet_share is not None,
+        fixed_inlet_counts=cfg.tissue.inlet_share is not None and cfg.tissue.inlet_share_tolerance is None,
+        inlet_count_bounds=inlet_count_bounds(cfg.tissue.inlet_share, cfg.tissue.inlet_share_tolerance, n),
         bifurcation_region=(
             np.zeros((0, 0, 0), dtype=np.uint8)
             if cfg.tissue.bifurcation_reach is None

@@ -431,26 +431,39 @@ def _swap_nodes(model, state, a, b, temp):
     stamp = state.counters[COUNTER_SWAP_PROPOSED]
     mark = state.scratch_mark
     x = pa
+    top_a = pa  # a's inlet, once the walk ends
     while x >= 0:
         if x == b:
             return ILLEGAL
         mark[x] = stamp
+        top_a = x
         x = parent[x]
     lca = -1  # stays -1 when a and b hang from different inlets
     x = pb
+    top_b = pb
     while x >= 0:
         if x == a:
             return ILLEGAL
         if mark[x] == stamp:
             lca = x
             break
+        top_b = x
         x = parent[x]
-    if lca == -1 and model.fixed_inlet_counts and state.n_downstream[a] != state.n_downstream[b]:
-        return ILLEGAL
     # volume and power: n changes on the paths from the old parents up to the LCA, and the
     # two moved segments change length (their own n does not change)
     na = state.n_downstream[a]
     nb = state.n_downstream[b]
+    if lca == -1 and na != nb:  # the swap moves na - nb terminals from a's inlet tree to b's
+        if model.fixed_inlet_counts:
+            return ILLEGAL
+        bounds = model.inlet_count_bounds
+        if bounds.shape[0] > 0:
+            new_a = state.n_downstream[top_a] - na + nb
+            new_b = state.n_downstream[top_b] - nb + na
+            ia = top_a
+            ib = top_b
+            if not (bounds[ia, 0] <= new_a <= bounds[ia, 1] and bounds[ib, 0] <= new_b <= bounds[ib, 1]):
+                return ILLEGAL
     d_vol = 0.0
     d_pow = 0.0
     d_exc = 0.0

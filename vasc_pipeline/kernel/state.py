@@ -104,6 +104,8 @@ Model = namedtuple(
         "early_reject",  # skip the exclusion traversals when a lower bound of ΔC fails Metropolis
         # (same decisions and random stream either way; False only to test that)
         "fixed_inlet_counts",  # tissue.inlet_share: a swap between inlet trees must keep their terminal counts
+        "inlet_count_bounds",  # int64 (K, 2): the fewest and most terminals each inlet's tree may feed
+        # (tissue.inlet_share_tolerance); shape (0, 2): no bounds
         "bifurcation_region",  # uint8 (nz, ny, nx): where a bifurcation may lie (tissue.bifurcation_reach);
         # shape (0, 0, 0): anywhere in the grid's box
         "supply_shell_width",  # float, voxels: the widest supply shell a terminal keeps (SHELL_WIDTH;

@@ -24,6 +24,7 @@ __all__ = [
     "node_kinds",
     "random_tree",
     "inlet_counts",
+    "inlet_count_bounds",
     "nearest_inlets",
     "count_terminals",
     "check_tree",
@@ -217,6 +218,23 @@ def inlet_counts(inlet_share, n_terminals: int) -> np.ndarray:
     while counts.sum() > n_terminals:  # the minimum of one per inlet overshot
         counts[np.argmax(counts)] -= 1
     return counts
+
+
+def inlet_count_bounds(inlet_share, tolerance: float | None, n_terminals: int) -> np.ndarray:
+    """int64 (K, 2): the fewest and most terminals each inlet may feed when its share may stray
+    ``tolerance`` from ``inlet_share`` (at least one, at most N - K + 1); shape (0, 2) when the
+    share is free (no ``inlet_share``) or fixed (no ``tolerance``: :func:`inlet_counts` is kept).
+
+    >>> inlet_count_bounds([0.62, 0.38], 0.1, 1000).tolist()
+    [[520, 720], [280, 480]]
+    """
+    if inlet_share is None or tolerance is None:
+        return np.zeros((0, 2), dtype=np.int64)
+    share = np.asarray(inlet_share, dtype=float)
+    k = share.size
+    lo = np.clip(np.ceil((share - tolerance) * n_terminals - 1e-9), 1, n_terminals - k + 1)
+    hi = np.clip(np.floor((share + tolerance) * n_terminals + 1e-9), 1, n_terminals - k + 1)
+    return np.stack([lo, hi], axis=1).astype(np.int64)
 
 
 def check_tree(tree: Tree, tissue: Tissue | None = None) -> None:
