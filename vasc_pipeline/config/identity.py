@@ -121,10 +121,16 @@ def hashed_config(config: Mapping[str, Any]) -> dict:
             node = node.get(name) if isinstance(node, Mapping) else None
         if isinstance(node, Mapping) and leaf in node and node[leaf] == neutral:
             node = out
+            path = []
             for name in parents:  # copy the path before removing, the caller's config stays intact
                 node[name] = dict(node[name])
+                path.append((node, name))
                 node = node[name]
             del node[leaf]
+            for above, name in reversed(path):  # a section added later (model) leaves no empty trace
+                if above[name]:
+                    break
+                del above[name]
     return out
 
 

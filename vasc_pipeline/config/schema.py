@@ -33,6 +33,8 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "CheckpointConfig",
     "MethodConfig",
     "METHODS",
+    "ModelConfig",
+    "MODELS",
     "RunConfig",
     "SweepConfig",
     "ClusterConfig",
@@ -72,6 +74,7 @@ GAMMA_RANGE = (1.0, 4.0)
 # the model (tissue.exclude_cavities: True) is listed with its old behaviour, so runs made
 # before it are, rightly, a different configuration.
 KEYS_ADDED_LATER: dict[str, Any] = {
+    "model.name": "paper",
     "tissue.exclude_cavities": False,
     "tissue.exclusion_path": None,
     "tissue.exclusion_array": None,
@@ -99,6 +102,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.part_phases": 64,
     "anneal.part_share": 0.9,
 }
+MODELS = ("paper", "physiological")  # conf/model/: which physics and tissue keys a model sets
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
@@ -236,6 +240,15 @@ class AnnealConfig(Settings):
 
 
 @dataclass
+class ModelConfig(Settings):
+    """Which model the physics and tissue keys spell (``model=paper``, ``model=physiological``;
+    conf/model/): the group sets those keys, this name records the choice. Every key it sets
+    stays overridable, so the name is a label, and the keys are the run's identity."""
+
+    name: str = "paper"
+
+
+@dataclass
 class TerminalsConfig(Settings):
     path: Optional[str] = None  # CSV of x, y, z (m)
     fixed: bool = False  # fixed sites never move; the supply term is off
@@ -262,6 +275,7 @@ class RunConfig(Settings):
     n_terminals: int = 200
     seed: int = 0
     output_dir: str = "results/default"
+    model: ModelConfig = field(default_factory=ModelConfig)
     tissue: TissueConfig = field(default_factory=TissueConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     anneal: AnnealConfig = field(default_factory=AnnealConfig)
@@ -391,6 +405,8 @@ def validate(cfg: RunConfig) -> RunConfig:
             "physics.pressure_inlet must exceed physics.pressure_terminal, which must be >= 0 (Pa; blood "
             f"flows from the inlets to the terminals), got {phys.pressure_inlet:g} and {phys.pressure_terminal:g}"
         )
+    if cfg.model.name not in MODELS:
+        raise ConfigError(f"model.name: unknown model {cfg.model.name!r}; accepted: {', '.join(MODELS)} (model=...)")
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
     if cfg.tissue.inlet_assignment not in INLET_ASSIGNMENTS:
