@@ -40,6 +40,12 @@ def test_the_physiological_model_sets_its_keys_on_every_tissue_and_each_stays_ov
     assert compose(["model=physiological", "physics.gamma=2.1"]).physics.gamma == 2.1
 
 
+def test_the_cco_growth_takes_the_physiological_physics_but_not_the_anneals_confinements():
+    cfg = compose(["model=physiological", "method=cco"])
+    assert cfg.physics.gamma == pytest.approx(7 / 3) and cfg.physics.r_cutoff == 2e-4
+    assert cfg.tissue.bifurcation_reach is None and cfg.tissue.inlet_share is None  # the anneal's keys
+
+
 def test_a_tissue_keeps_what_it_sets_itself_under_either_model():
     for model in ("paper", "physiological"):
         assert compose([f"model={model}", "+sweep=convergence"]).physics.gamma == 3.0  # the paper's 2-D test
