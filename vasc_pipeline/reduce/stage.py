@@ -273,13 +273,11 @@ def reduce(
     stream.write(format_comparison(summary) + "\n")
     result.removed = remove_superseded_outputs(out, best)
     if exports:
-        from . import zerod
         from .export import export_run
 
         try:
             for r in best.values():
-                result.trees.extend(export_run(r.path, out / TREES_DIR))
-                result.trees.append(zerod.export_run(r.path, out / TREES_DIR))  # the svZeroDSolver network
+                result.trees.extend(export_run(r.path, out / TREES_DIR))  # .vtp, .csv, .0d.json
         except Exception as exc:  # an export problem must not hide the summary already written
             result.errors["exports"] = f"{type(exc).__name__}: {exc}"
     if figures:
