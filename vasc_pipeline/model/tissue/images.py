@@ -9,7 +9,7 @@ with flipped or permuted axes are reoriented to that frame; an oblique (rotated)
 anisotropic voxels are refused with the spacing in the message (resample it first, e.g. with
 SimpleITK or 3D Slicer). :func:`write_label_map` writes a NIfTI label map the other way.
 
-    python -m vasc_pipeline.model.tissue.images heart.nii.gz [N_TERMINALS]
+    python -m vasc_pipeline.model.tissue heart.nii.gz [N_TERMINALS]
 
 writes the shipped heart as a label map (1 myocardium, 2 cavities, 3 the open space above the
 base that the exclusion map looks through) and its ostia as ``heart.inlets.json``; feed it back
@@ -215,15 +215,8 @@ def write_heart(path, n_terminals: int = 200) -> tuple[Path, Path]:
     return path, inlets
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if not 1 <= len(args) <= 2 or args[0] in ("-h", "--help") or not is_label_map(args[0]):
-        print("usage: python -m vasc_pipeline.model.tissue.images OUT.nii.gz [N_TERMINALS]", file=sys.stderr)
-        return 2
-    image, inlets = write_heart(args[0], int(args[1]) if len(args) > 1 else 200)
-    print(f"{image}\n{inlets}")
-    return 0
+if __name__ == "__main__":  # the former command; runpy warns here, the package's own entry does not
+    from .__main__ import main
 
-
-if __name__ == "__main__":
+    print("vasc_pipeline: the command is now python -m vasc_pipeline.model.tissue", file=sys.stderr)
     sys.exit(main())
