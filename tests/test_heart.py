@@ -351,3 +351,17 @@ def test_bad_heart_options_are_refused_before_any_job(tmp_path, key, value, mess
         with pytest.raises(TissueError, match=message):
             plan(compose([f"tissue.{key}={value}", f"output_dir={tmp_path / 'out'}", "n_terminals=300"]))
         assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_reports_the_heart_mass_once(caplog, tmp_path):
+    """Planning builds the heart (and its exclusion grid's twin at tissue.exclusion_voxel_size), the
+    kernels' warm-up builds it again: the achieved mass is reported once, for the supply grid."""
+    from vasc_pipeline.pipeline import orchestrate, planning
+
+    cfg = compose(["n_terminals=16", "anneal.steps=600", "anneal.trace_every=300", f"output_dir={tmp_path}"])
+    with caplog.at_level(logging.INFO, logger="vasc_pipeline.model.tissue.heart"):
+        p = planning.plan(cfg)
+        orchestrate.compile_kernels(p.jobs)
+    reports = [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO and "myocardium" in r.getMessage()]
+    supply_mm = build_tissue("heart", 16).voxel_size * 1e3
+    assert len(reports) == 1 and f"voxels of {supply_mm:.3g} mm" in reports[0], reports

@@ -60,7 +60,8 @@ def build_tissue(name: str, n_terminals: int, exclusion_voxel_size: float | None
     if exclusion_voxel_size is not None and exclusion_voxel_size != tissue.voxel_size:
         try:
             if name in SHAPED_TISSUES:
-                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size})
+                # only its exclusion grid is used: the tissue it voxelises is not reported again
+                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size}, report=False)
                 tissue.exclusion_grid = twin.exclusion_grid
             else:
                 tissue.exclusion_grid = resampled_exclusion_grid(tissue, exclusion_voxel_size)
