@@ -155,3 +155,62 @@ def test_bad_labels_and_contradicting_keys_name_the_field(tmp_path):
         make_problem(*base, "tissue.voxel_size=0.001")
     with pytest.raises(ConfigError, match=r"tissue\.labels is read by tissue=mask only"):
         make_problem("tissue=sphere", "tissue.labels.supply=[1]")
+
+
+# -- inputs that read badly or passed silently ---------------------------------------------
+
+
+def test_a_file_of_no_format_read_lists_the_formats(tmp_path):
+    script = tmp_path / "make.py"
+    script.write_text("print('not a mask')\n")
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for path in (script, folder):
+        with pytest.raises(TissueError) as err:
+            make_problem("tissue=mask", f"tissue.path={path}", "tissue.voxel_size=1e-3", "tissue.inlets=[[0,0,0]]")
+        text = str(err.value)
+        assert text.startswith(f"tissue.path: {str(path)!r} is ") and "No group found" not in text, text
+        for accepted in (".npy", "Zarr", ".nii.gz", ".nrrd"):
+            assert accepted in text, text
+
+
+def test_a_damaged_label_map_says_so(tmp_path):
+    good = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    nrrd.write(str(tmp_path / "m.nrrd"), labels_zyx().transpose(2, 1, 0), {"space directions": np.eye(3) * 2.0})
+    raw = (tmp_path / "m.nrrd").read_bytes()
+    cases = {
+        "cut.nrrd": raw[: raw.index(b"sizes")] + b"sizes 13\n",  # a header line without its colon
+        "half.nrrd": raw[: len(raw) // 2],
+        "cut.nii.gz": good.read_bytes()[:100],
+    }
+    for name, content in cases.items():
+        (tmp_path / name).write_bytes(content)
+        kind = "NRRD" if name.endswith(".nrrd") else "NIfTI"
+        with pytest.raises(TissueError) as err:
+            make_problem("tissue=mask", f"tissue.path={tmp_path / name}", "tissue.inlets=[[0,0,0]]")
+        text = str(err.value)
+        assert f"tissue.path: {str(tmp_path / name)!r} is not a readable {kind} label map" in text, text
+        assert "damaged" in text and "truncated" in text, text
+
+
+def test_an_inlet_from_a_file_outside_the_grid_names_the_file_in_mm(tmp_path):
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    inlets = tmp_path / "ostia.json"
+    inlets.write_text(json.dumps({"LCA": [-0.03, 0.03, 0.013]}))  # x far left of the grid
+    with pytest.raises(TissueError) as err:
+        make_problem("tissue=mask", f"tissue.path={path}", f"tissue.inlets_path={inlets}", "n_terminals=12")
+    text = str(err.value)
+    where = f"tissue.inlets_path ({str(inlets)!r}): inlet 0 (LCA) at [-30, 30, 13] mm lies outside"
+    assert text.startswith(where), text
+    assert "0.030000000000000002" not in text and "box, x [-11, 15], y [19, 41], z [4, 22] mm" in text, text
+
+
+@pytest.mark.parametrize("role", ["exclusion", "open"])
+def test_labels_absent_from_the_map_are_refused_in_every_role(tmp_path, role):
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    base = ("tissue=mask", f"tissue.path={path}", "tissue.inlets=[[0.0,0.03,0.02]]", "n_terminals=12")
+    absent = rf"tissue\.labels\.{role}: no voxel of .* holds the labels \[7\] \(its labels: \[0, 1, 2\]\)"
+    with pytest.raises(TissueError, match=absent):
+        make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[7]")
+    with pytest.raises(TissueError, match=rf"tissue\.labels\.{role}: no voxel .* holds the labels \[7\]"):
+        make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[2,7]")  # one of them absent

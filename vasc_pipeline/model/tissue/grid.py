@@ -170,6 +170,9 @@ class Tissue:
     exclusion_grid : ExclusionGrid
         The grid the exclusion term is summed on: this grid's ``distance`` unless the builder
         (``tissue.exclusion_voxel_size``, :func:`vasc_pipeline.model.tissue.build_tissue`) set another.
+    inlets_from : str
+        Where the inlets came from (``tissue.inlets``, or ``tissue.inlets_path`` and its file),
+        the words an error about them starts with.
     """
 
     name: str
@@ -181,6 +184,7 @@ class Tissue:
     inlet_names: tuple[str, ...] = ()
     exclusion: np.ndarray | None = field(default=None, repr=False)
     open_boundary: np.ndarray | None = field(default=None, repr=False)
+    inlets_from: str = field(default="tissue.inlets", repr=False)
     distance: np.ndarray = field(init=False, repr=False)
     exclusion_grid: ExclusionGrid = field(init=False, repr=False)
 
@@ -196,19 +200,7 @@ class Tissue:
             raise TissueError(f"tissue.voxel_size must be a positive length in metres, got {self.voxel_size}")
         if self.ndim == 2 and self.mask.shape[0] != 1:
             raise TissueError("a 2-D tissue has exactly one voxel layer")
-        if self.inlets.shape[1] != 3 or len(self.inlets) < 1:
-            raise TissueError(
-                f"tissue.inlets must be a list of [x, y, z] positions in metres, got {self.inlets.tolist()}"
-            )
-        if not self.inlet_names:
-            self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
-        lo, hi = self.bounds
-        for k, p in enumerate(self.inlets):
-            if np.any(p < lo) or np.any(p > hi):
-                raise TissueError(
-                    f"inlet {k} ({self.inlet_names[k]}) at {p.tolist()} m lies outside the voxel grid "
-                    f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid"
-                )
+        self._check_inlets()
         if self.exclusion is None:
             self.exclusion = self.mask.copy()
         else:
@@ -228,6 +220,26 @@ class Tissue:
         # pads it so the grid edge counts as outside (but where an open boundary continues).
         self.distance = exclusion_distance(self.exclusion, self.open_boundary, self.ndim)
         self.exclusion_grid = ExclusionGrid(self.distance, self.origin, float(self.voxel_size))
+
+    def _check_inlets(self) -> None:
+        """Refuse (TissueError starting with :attr:`inlets_from`) inlets that are not [x, y, z]
+        positions inside the voxel grid's box."""
+        if self.inlets.ndim != 2 or self.inlets.shape[1] != 3 or len(self.inlets) < 1:
+            raise TissueError(
+                f"{self.inlets_from} must hold one or more [x, y, z] positions in metres, got {self.inlets.tolist()}"
+            )
+        if not self.inlet_names:
+            self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
+        lo, hi = self.bounds
+        for k, p in enumerate(self.inlets):
+            if np.any(p < lo) or np.any(p > hi):
+                box = ", ".join(f"{axis} [{a * 1e3:.4g}, {b * 1e3:.4g}]" for axis, a, b in zip("xyz", lo, hi))
+                raise TissueError(
+                    f"{self.inlets_from}: inlet {k} ({self.inlet_names[k]}) at {_mm(p)} lies outside the voxel "
+                    f"grid's box, {box} mm"
+                    + (" (the plane of a 2-D tissue)" if self.ndim == 2 else "")
+                    + "; an inlet must lie inside it (positions in metres)"
+                )
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -301,6 +313,11 @@ class Tissue:
                 moved[:, 2] = points[outside, 2]
             points[outside] = moved
         return points
+
+
+def _mm(point) -> str:
+    """A position [m] as an error message gives it: in millimetres, four significant digits."""
+    return "[" + ", ".join(f"{v * 1e3:.4g}" for v in np.asarray(point, dtype=np.float64)) + "] mm"
 
 
 def voxelize(

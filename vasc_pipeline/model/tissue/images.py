@@ -29,6 +29,7 @@ from .grid import Tissue, TissueError
 
 __all__ = [
     "LABEL_MAP_SUFFIXES",
+    "MASK_FORMATS",
     "HEART_LABELS",
     "is_label_map",
     "read_label_map",
@@ -39,6 +40,11 @@ __all__ = [
 ]
 
 LABEL_MAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr")
+# What tissue.path (and tissue.exclusion_path) reads, for the messages that refuse anything else.
+MASK_FORMATS = (
+    "a NumPy .npy file, a Zarr array or group (a directory), or a NIfTI (.nii, .nii.gz) or NRRD (.nrrd, .nhdr) "
+    "label map"
+)
 # The label values write_heart uses: myocardium (supply), cavities (excluded), open base.
 HEART_LABELS = {"supply": 1, "exclusion": 2, "open": 3}
 _ISOTROPY = 1e-4  # relative spread of the voxel edges accepted as isotropic
@@ -103,8 +109,9 @@ _UNITS = {"mm": 1e-3, "m": 1.0, "meter": 1.0, "micron": 1e-6, "um": 1e-6}
 
 def _open(path, field: str, with_data: bool):
     """(data (i, j, k) or None, shape, voxel-to-world affine in metres) of a label map."""
+    is_nrrd = str(path).lower().endswith((".nrrd", ".nhdr"))
     try:
-        if str(path).lower().endswith((".nrrd", ".nhdr")):
+        if is_nrrd:
             import nrrd
 
             data, header = nrrd.read(str(path)) if with_data else (None, nrrd.read_header(str(path)))
@@ -125,8 +132,13 @@ def _open(path, field: str, with_data: bool):
         ) from exc
     except TissueError:
         raise
-    except Exception as exc:  # a damaged or foreign file: say which and why
-        raise TissueError(f"tissue.{field}: cannot read the label map {str(path)!r}: {exc}") from exc
+    except Exception as exc:  # a damaged or foreign file: the reader's own words only as detail
+        kind, reader = ("NRRD", "pynrrd") if is_nrrd else ("NIfTI", "nibabel")
+        raise TissueError(
+            f"tissue.{field}: {str(path)!r} is not a readable {kind} label map: the file is damaged, truncated or "
+            f"not {kind} ({reader}: {type(exc).__name__}: {exc}); write it again from the segmentation, or give "
+            f"another of the formats read: {MASK_FORMATS}"
+        ) from exc
     if str(unit).lower() not in _UNITS:
         raise TissueError(f"tissue.{field}: the label map {str(path)!r} is in {unit!r}; accepted: mm, m, um")
     affine = np.array(affine, dtype=float)

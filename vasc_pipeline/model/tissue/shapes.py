@@ -103,6 +103,13 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
     if images.is_label_map(p):  # NIfTI or NRRD: spacing and origin from the header
         data, h, origin = images.read_label_map(p, field)
         return data, {"voxel_size": h, "origin": origin.tolist()}
+    if p.is_file() and p.suffix != ".npy":  # Zarr would call it "No group found in store"
+        raise TissueError(f"tissue.{field}: {str(p)!r} is not a mask this reads; accepted: {images.MASK_FORMATS}")
+    if p.is_dir() and not any((p / name).is_file() for name in ("zarr.json", ".zarray", ".zgroup")):
+        raise TissueError(
+            f"tissue.{field}: {str(p)!r} is a directory but not a Zarr store (no zarr.json, .zarray or .zgroup in "
+            f"it); accepted: {images.MASK_FORMATS}"
+        )
     attrs: dict = {}
     try:
         if p.suffix == ".npy":
@@ -197,10 +204,12 @@ def mask(
     if org.shape != (3,):
         raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
     names: tuple[str, ...] = ()
+    inlets_from = "tissue.inlets"
     if inlets_path:
         if inlets is not None:
             raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
         inlets, names = images.read_inlets(inlets_path)
+        inlets_from = f"tissue.inlets_path ({inlets_path!r})"
     if inlets is None:
         raise TissueError(
             "tissue.inlets (a list of [x, y, z] positions in metres) or tissue.inlets_path is required for tissue=mask"
@@ -213,12 +222,20 @@ def mask(
             raise TissueError(
                 "tissue.labels.exclusion and tissue.exclusion_path both give the exclusion domain: set one"
             )
+        present = set(np.unique(data).tolist())
+        for role, values in by_label.items():  # a label in no voxel is a mistake in every role
+            missing = [v for v in values if v not in present]
+            if missing:
+                raise TissueError(
+                    f"tissue.labels.{role}: no voxel of {path!r} holds the labels {missing} (its labels: "
+                    f"{sorted(present)[:20]}{', ...' if len(present) > 20 else ''})"
+                )
         named = np.isin(data, [v for k in ("exclusion", "open") for v in by_label.get(k, [])])
         grid = (np.isin(data, by_label["supply"]) if "supply" in by_label else (data != 0) & ~named).astype(np.uint8)
         if not grid.any():
             raise TissueError(
-                f"tissue.labels.supply: no voxel of {path!r} holds the labels {by_label.get('supply', 'nonzero')} "
-                f"(its labels: {np.unique(data).tolist()[:20]})"
+                f"tissue.labels.supply: no voxel of {path!r} is left for the tissue: every nonzero label is named "
+                f"exclusion or open (its labels: {sorted(present)[:20]})"
             )
         if "exclusion" in by_label:
             extra = np.isin(data, by_label["exclusion"]).astype(np.uint8)
@@ -238,5 +255,14 @@ def mask(
     if ndim == 2 and open_boundary is not None:
         open_boundary = open_boundary[None]
     return Tissue(
-        "mask", grid, float(h), org, inlets, ndim=ndim, inlet_names=names, exclusion=extra, open_boundary=open_boundary
+        "mask",
+        grid,
+        float(h),
+        org,
+        inlets,
+        ndim=ndim,
+        inlet_names=names,
+        exclusion=extra,
+        open_boundary=open_boundary,
+        inlets_from=inlets_from,
     )
