@@ -214,3 +214,13 @@ def test_labels_absent_from_the_map_are_refused_in_every_role(tmp_path, role):
         make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[7]")
     with pytest.raises(TissueError, match=rf"tissue\.labels\.{role}: no voxel .* holds the labels \[7\]"):
         make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[2,7]")  # one of them absent
+
+
+def test_a_label_map_whose_header_gives_metre_voxels_is_refused_naming_the_file(tmp_path):
+    """A 1000 mm voxel (a header in the wrong unit): a 26 m organ, which would run to exit 0."""
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), 1.0, ORIGIN * 500)
+    with pytest.raises(TissueError) as err:
+        make_problem("tissue=mask", f"tissue.path={path}", "tissue.inlets=[[0.0,15.0,10.0]]", "n_terminals=12")
+    text = str(err.value)
+    assert text.startswith(f"the header of tissue.path ({str(path)!r}) gives voxels of 1000 mm, outside "), text
+    assert "[0.001, 10] mm" in text and "unit" in text, text

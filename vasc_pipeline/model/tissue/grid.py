@@ -36,12 +36,21 @@ __all__ = [
     "voxelize",
     "default_voxel_size",
     "check_grid_memory",
+    "check_voxel_scale",
     "VOXELS_PER_SUPPLY_RADIUS",
+    "MASK_VOXEL_RANGE",
+    "MASK_EXTENT_RANGE",
 ]
 
 # Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
 # ~270 voxels per supply sphere at every N.
 VOXELS_PER_SUPPLY_RADIUS = 4.0
+# The scale of a user's grid (tissue=mask): images of organs, micro-CT to clinical CT and MRI, have voxel
+# edges of 1 um to 10 mm, and organs span 0.1 mm (a zebrafish heart) to 2 m (a whole human body). Outside
+# these a voxel size is almost surely in another unit (millimetres given as metres, a header's unit wrong),
+# which would run to the end and show only in the morphometry.
+MASK_VOXEL_RANGE = (1e-6, 1e-2)  # m
+MASK_EXTENT_RANGE = (1e-4, 2.0)  # m, the tissue's largest extent along x, y or z
 # Peak bytes per voxel while a grid is built: three float64 coordinate grids, the boolean and
 # uint8 masks, the distance transform (float64 distances and int32 feature indices per axis)
 # and its float32 copy. An estimate that refuses a grid before it is allocated.
@@ -72,6 +81,44 @@ def check_grid_memory(counts, voxel_size: float) -> None:
 
 class TissueError(ValueError):
     """A tissue configuration that cannot be built; the message names the field."""
+
+
+def check_voxel_scale(tissue: Tissue, supply_radius: float, n_terminals: int) -> None:
+    """Refuse (TissueError) a voxel size the model cannot use: one coarser than the supply sphere
+    (the supply term counts the voxels within R_supply of a terminal: it needs several), and, on
+    a user's grid (:attr:`Tissue.voxel_size_from` set: ``tissue=mask``), voxels or a tissue at a
+    scale no organ has (:data:`MASK_VOXEL_RANGE`, :data:`MASK_EXTENT_RANGE`)."""
+    h = float(tissue.voxel_size)
+    given = tissue.voxel_size_from
+    if given is not None:
+        unit = (
+            "tissue.voxel_size is in metres (1 mm is 0.001)"
+            if given.startswith("tissue.voxel_size")
+            else "is the header's unit right? (NIfTI's xyzt_units, NRRD's space units; unset means mm)"
+        )
+        lo, hi = MASK_VOXEL_RANGE
+        if not lo <= h <= hi:
+            raise TissueError(
+                f"{given} gives voxels of {h * 1e3:.4g} mm, outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the voxel "
+                f"edges of images of organs (micro-CT to clinical CT and MRI): {unit}"
+            )
+        occupied = np.argwhere(tissue.mask)
+        voxels = int((occupied.max(axis=0) - occupied.min(axis=0)).max()) + 1
+        extent = voxels * h
+        lo, hi = MASK_EXTENT_RANGE
+        if not lo <= extent <= hi:
+            raise TissueError(
+                f"{given} gives the tissue of {tissue.source!r} an extent of {extent * 1e3:.4g} mm ({voxels} voxels "
+                f"of {h * 1e3:.4g} mm), outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the sizes of organs (a zebrafish "
+                f"heart to a whole human body): {unit}"
+            )
+    if supply_radius / h < 1.0:
+        what = f"tissue.voxel_size={h:.4g} m" if given is None else f"{given}: voxels of {h * 1e3:.4g} mm"
+        raise TissueError(
+            f"{what} is coarser than the supply sphere (R_supply = {supply_radius:.4g} m at n_terminals="
+            f"{n_terminals}; the grid is {tissue.shape[2]} x {tissue.shape[1]} x {tissue.shape[0]} voxels): the "
+            "largest accepted voxel_size is R_supply. Set a smaller tissue.voxel_size, or leave it unset (R_supply / 4)"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +220,11 @@ class Tissue:
     inlets_from : str
         Where the inlets came from (``tissue.inlets``, or ``tissue.inlets_path`` and its file),
         the words an error about them starts with.
+    source : str, optional
+        The file a user's grid was read from (``tissue.path``); None for a shape built in code.
+    voxel_size_from : str, optional
+        Where a user's voxel size came from (``tissue.voxel_size``, a label map's header, a Zarr
+        attribute), the words :func:`check_voxel_scale` starts with; None for a shape built in code.
     """
 
     name: str
@@ -185,6 +237,8 @@ class Tissue:
     exclusion: np.ndarray | None = field(default=None, repr=False)
     open_boundary: np.ndarray | None = field(default=None, repr=False)
     inlets_from: str = field(default="tissue.inlets", repr=False)
+    source: str | None = field(default=None, repr=False)
+    voxel_size_from: str | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
     exclusion_grid: ExclusionGrid = field(init=False, repr=False)
 

@@ -200,6 +200,12 @@ def mask(
     h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
     if h is None or not float(h) > 0:
         raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
+    if voxel_size is not None:
+        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
+    elif images.is_label_map(path):
+        voxel_size_from = f"the header of tissue.path ({path!r})"
+    else:
+        voxel_size_from = f"the voxel_size attribute of tissue.path ({path!r})"
     org = np.asarray(org, dtype=np.float64)
     if org.shape != (3,):
         raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
@@ -265,4 +271,6 @@ def mask(
         exclusion=extra,
         open_boundary=open_boundary,
         inlets_from=inlets_from,
+        source=str(path),
+        voxel_size_from=voxel_size_from,
     )
