@@ -365,3 +365,11 @@ def test_a_sweep_reports_the_heart_mass_once(caplog, tmp_path):
     reports = [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO and "myocardium" in r.getMessage()]
     supply_mm = build_tissue("heart", 16).voxel_size * 1e3
     assert len(reports) == 1 and f"voxels of {supply_mm:.3g} mm" in reports[0], reports
+
+
+def test_ostia_on_the_base_plane_open_onto_the_cavity_and_are_accepted():
+    """At ostium_height=0 the LCA lies on the base plane over the LV's cavity: in a cavity voxel of
+    the top layer, whose face opens onto the space above the base. Not inside the cavity."""
+    t = heart.heart_tissue(200, ostium_height=0.0)
+    assert t.contains(t.inlets, t.cavity)[0]
+    np.testing.assert_array_equal(t.inlets[:, 2], 0.0)

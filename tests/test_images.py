@@ -128,7 +128,7 @@ def test_the_shipped_heart_round_trips_through_a_label_map(tmp_path):
 
 def test_a_run_on_a_label_map_through_the_config(tmp_path):
     path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
-    (tmp_path / "inlets.csv").write_text("name,x,y,z\nroot,0.002,0.03,0.013\n")
+    (tmp_path / "inlets.csv").write_text("name,x,y,z\nroot,0.002,0.03,0.021\n")  # just above the shell
     problem = make_problem(
         "tissue=mask",
         f"tissue.path={path}",
@@ -224,3 +224,30 @@ def test_a_label_map_whose_header_gives_metre_voxels_is_refused_naming_the_file(
     text = str(err.value)
     assert text.startswith(f"the header of tissue.path ({str(path)!r}) gives voxels of 1000 mm, outside "), text
     assert "[0.001, 10] mm" in text and "unit" in text, text
+
+
+def test_an_inlet_inside_an_excluded_cavity_is_refused(tmp_path):
+    """An ostium lies in the tissue or the open space next to it (the heart's lie above the base,
+    outside the myocardium); inside a cavity its root segment could not leave without crossing it."""
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    centre = (ORIGIN + H * np.array([6, 5, 4])).tolist()  # label 2, the cavity
+    shell = (ORIGIN + H * np.array([6, 5, 7])).tolist()  # label 1, the tissue
+    above = (ORIGIN + H * np.array([6, 5, 8])).tolist()  # label 0, outside
+    base = ("tissue=mask", f"tissue.path={path}", "n_terminals=12")
+    inlets = f"tissue.inlets=[{above},{centre}]".replace(" ", "")
+    with pytest.raises(TissueError) as err:
+        make_problem(*base, "tissue.labels.supply=[1]", "tissue.labels.exclusion=[2]", inlets)
+    text = str(err.value)
+    assert text.startswith("tissue.inlets: inlet 1 (inlet1) at [2, 30, 13] mm lies inside a cavity of the"), text
+    # the same cavity given as a mask of its own (tissue.exclusion_path)
+    labels = labels_zyx()
+    np.save(tmp_path / "tissue.npy", (labels == 1).astype(np.uint8))
+    np.save(tmp_path / "cavity.npy", (labels == 2).astype(np.uint8))
+    own = ("tissue=mask", f"tissue.path={tmp_path / 'tissue.npy'}", f"tissue.voxel_size={H!r}", "n_terminals=12")
+    own += (f"tissue.origin={ORIGIN.tolist()}".replace(" ", ""), f"tissue.exclusion_path={tmp_path / 'cavity.npy'}")
+    with pytest.raises(TissueError, match=r"tissue\.inlets: inlet 0 .* lies inside a cavity"):
+        make_problem(*own, f"tissue.inlets=[{centre}]".replace(" ", ""))
+    for fine in (shell, above):  # in the tissue or outside it: accepted
+        make_problem(*own, f"tissue.inlets=[{fine}]".replace(" ", ""))
+    # without an exclusion role the label is plain tissue (every nonzero label): accepted
+    make_problem(*base, f"tissue.inlets=[{centre}]".replace(" ", ""))

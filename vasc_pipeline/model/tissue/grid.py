@@ -236,7 +236,7 @@ class Tissue:
     inlet_names: tuple[str, ...] = ()
     exclusion: np.ndarray | None = field(default=None, repr=False)
     open_boundary: np.ndarray | None = field(default=None, repr=False)
-    inlets_from: str = field(default="tissue.inlets", repr=False)
+    inlets_from: str = field(default="the tissue's own inlets", repr=False)
     source: str | None = field(default=None, repr=False)
     voxel_size_from: str | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
@@ -254,7 +254,6 @@ class Tissue:
             raise TissueError(f"tissue.voxel_size must be a positive length in metres, got {self.voxel_size}")
         if self.ndim == 2 and self.mask.shape[0] != 1:
             raise TissueError("a 2-D tissue has exactly one voxel layer")
-        self._check_inlets()
         if self.exclusion is None:
             self.exclusion = self.mask.copy()
         else:
@@ -270,6 +269,7 @@ class Tissue:
                 f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
                 f"the tissue mask {self.mask.shape}; they must be the same grid"
             )
+        self._check_inlets()
         # The builders pad the grid, but a user's mask may touch its edge: the distance map
         # pads it so the grid edge counts as outside (but where an open boundary continues).
         self.distance = exclusion_distance(self.exclusion, self.open_boundary, self.ndim)
@@ -277,7 +277,11 @@ class Tissue:
 
     def _check_inlets(self) -> None:
         """Refuse (TissueError starting with :attr:`inlets_from`) inlets that are not [x, y, z]
-        positions inside the voxel grid's box."""
+        positions inside the voxel grid's box, or that lie in a cavity (:attr:`cavity`).
+
+        An inlet may lie in the tissue or outside it (the heart's ostia lie above its base, by the
+        aortic root), but not in a voxel of the exclusion domain that is not tissue: its root
+        segment would have to cross the cavity large vessels must not cross."""
         if self.inlets.ndim != 2 or self.inlets.shape[1] != 3 or len(self.inlets) < 1:
             raise TissueError(
                 f"{self.inlets_from} must hold one or more [x, y, z] positions in metres, got {self.inlets.tolist()}"
@@ -294,6 +298,26 @@ class Tissue:
                     + (" (the plane of a 2-D tissue)" if self.ndim == 2 else "")
                     + "; an inlet must lie inside it (positions in metres)"
                 )
+        for k in np.flatnonzero(self.contains(self.inlets, self.cavity)):
+            if self._opens_outward(self.voxel_index(self.inlets[k])):
+                continue  # at the cavity's opening, as the heart's ostia on its base plane may be
+            raise TissueError(
+                f"{self.inlets_from}: inlet {k} ({self.inlet_names[k]}) at {_mm(self.inlets[k])} lies inside a cavity "
+                "of the exclusion domain (voxels large vessels must not cross although they are no tissue: "
+                "tissue.labels.exclusion, tissue.exclusion_path, the heart's ventricles), which its root segment "
+                "could not leave without crossing; an inlet (ostium) lies in the tissue or in the space outside it"
+            )
+
+    def _opens_outward(self, zyx) -> bool:
+        """True when a face neighbour of voxel ``zyx`` lies outside the exclusion domain (the grid's
+        edge counting as outside): the voxel is on the surface between a cavity and the outside."""
+        for axis in range(1 if self.ndim == 2 else 0, 3):  # one layer: no neighbour across the plane
+            for step in (-1, 1):
+                n = np.array(zyx)
+                n[axis] += step
+                if np.any(n < 0) or np.any(n >= np.array(self.shape)) or not self.exclusion[tuple(n)]:
+                    return True
+        return False
 
     @property
     def shape(self) -> tuple[int, int, int]:
