@@ -110,6 +110,8 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlet_share",
     "inlet_assignment",
     "bifurcation_reach",
+    "inlets",
+    "inlets_path",
 )
 
 
@@ -147,11 +149,13 @@ class TissueConfig(Settings):
     path: Optional[str] = None  # mask: .npy file or Zarr array
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
-    inlets: Optional[list[list[Any]]] = None  # mask: inlet positions [x, y, z], m (numbers; checked by validate)
+    # Inlet positions [x, y, z], m (numbers; checked by validate): a mask's (required, or inlets_path), or
+    # the ostia replacing any other tissue's own (the grid stays the tissue's); None: the tissue's own
+    inlets: Optional[list[list[Any]]] = None
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
     exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
     labels: LabelsConfig = field(default_factory=LabelsConfig)  # mask: label values by role
-    inlets_path: Optional[str] = None  # mask: inlets from a JSON {name: [x, y, z]} or CSV x, y, z[, name] (m)
+    inlets_path: Optional[str] = None  # as inlets, from a JSON {name: [x, y, z]} or CSV x, y, z[, name] (m)
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
@@ -415,6 +419,14 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "places them at their optimum: leave it unset (null) there"
             )
     _check_tissue_keys(cfg.tissue)
+    if cfg.tissue.ostium_height is not None and (cfg.tissue.inlets is not None or cfg.tissue.inlets_path):
+        given = "tissue.inlets" if cfg.tissue.inlets is not None else "tissue.inlets_path"
+        raise ConfigError(
+            f"tissue.ostium_height places the heart's own ostia, which {given} replaces: set one of them "
+            f"(got ostium_height={cfg.tissue.ostium_height:g} m)"
+        )
+    if cfg.tissue.inlets is not None and cfg.tissue.inlets_path:
+        raise ConfigError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
     _check_labels(cfg.tissue.labels)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):

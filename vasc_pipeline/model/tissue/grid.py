@@ -275,6 +275,15 @@ class Tissue:
         self.distance = exclusion_distance(self.exclusion, self.open_boundary, self.ndim)
         self.exclusion_grid = ExclusionGrid(self.distance, self.origin, float(self.voxel_size))
 
+    def place_inlets(self, inlets, names: tuple[str, ...] = (), source: str = "tissue.inlets") -> None:
+        """Replace the tissue's own inlets with ``inlets`` [m] (``tissue.inlets`` or
+        ``tissue.inlets_path``, named ``source`` in errors), checked as a builder's are; the grid
+        stays the tissue's."""
+        self.inlets = np.atleast_2d(np.asarray(inlets, dtype=np.float64))
+        self.inlet_names = tuple(names)
+        self.inlets_from = source
+        self._check_inlets()
+
     def _check_inlets(self) -> None:
         """Refuse (TissueError starting with :attr:`inlets_from`) inlets that are not [x, y, z]
         positions inside the voxel grid's box, or that lie in a cavity (:attr:`cavity`).

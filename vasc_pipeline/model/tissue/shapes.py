@@ -15,7 +15,7 @@ import numpy as np
 from . import images
 from .grid import Tissue, TissueError, default_voxel_size, voxelize
 
-__all__ = ["sphere", "box", "plane2d", "mask", "mask_geometry"]
+__all__ = ["sphere", "box", "plane2d", "mask", "mask_geometry", "given_inlets"]
 
 
 def sphere(
@@ -69,6 +69,19 @@ def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None
         lambda x, y, z: (x >= 0) & (x <= side) & (y >= 0) & (y <= side), [0, 0, 0], [side, side, 0], h, ndim=2
     )
     return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
+
+
+def given_inlets(inlets=None, inlets_path: str | None = None) -> tuple | None:
+    """(positions [m], names, the words naming them in errors) of the inlets a config gives,
+    ``tissue.inlets`` or ``tissue.inlets_path`` (read here); None when it gives none."""
+    if inlets_path:
+        if inlets is not None:
+            raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
+        points, names = images.read_inlets(inlets_path)
+        return points, names, f"tissue.inlets_path ({inlets_path!r})"
+    if inlets is None:
+        return None
+    return inlets, (), "tissue.inlets"
 
 
 def mask_geometry(path: str | None, array: str | None = None, voxel_size=None, origin=None, stored=None) -> tuple:
@@ -209,17 +222,12 @@ def mask(
     org = np.asarray(org, dtype=np.float64)
     if org.shape != (3,):
         raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
-    names: tuple[str, ...] = ()
-    inlets_from = "tissue.inlets"
-    if inlets_path:
-        if inlets is not None:
-            raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
-        inlets, names = images.read_inlets(inlets_path)
-        inlets_from = f"tissue.inlets_path ({inlets_path!r})"
-    if inlets is None:
+    given = given_inlets(inlets, inlets_path)
+    if given is None:
         raise TissueError(
             "tissue.inlets (a list of [x, y, z] positions in metres) or tissue.inlets_path is required for tissue=mask"
         )
+    inlets, names, inlets_from = given
     by_label = {k: v for k, v in (labels or {}).items() if v is not None}
     grid = (np.asarray(data) != 0).astype(np.uint8)
     extra = open_boundary = None
