@@ -45,6 +45,8 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "SWEPT_KEYS",
     "sweep_axis",
     "HEART_EXCLUSION_VOXEL_SIZE",
+    "ORGANS",
+    "organ_of",
     "scheduled_steps",
     "packing_steps",
     "CONFIG_DIR",
@@ -84,6 +86,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclusion_voxel_size": None,
     "tissue.labels": {"supply": None, "exclusion": None, "open": None},
     "tissue.inlets_path": None,
+    "tissue.organ": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -101,6 +104,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
+ORGANS = ("heart", "other")  # tissue.organ: the reduction compares a heart's trees with Kassab's pig coronaries
 # Tissue keys that apply to every tissue; each other key is read only by the tissue builders
 # (vasc_pipeline.model.tissue.TISSUES) whose signature names it.
 TISSUE_KEYS_OF_EVERY_TISSUE = (
@@ -112,6 +116,7 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "bifurcation_reach",
     "inlets",
     "inlets_path",
+    "organ",
 )
 
 
@@ -165,6 +170,10 @@ class TissueConfig(Settings):
     # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
     # heart); None: anywhere in the voxel grid's box (the paper).
     bifurcation_reach: Optional[float] = None
+    # What organ the tissue is: "heart" (the reduction compares the trees with Kassab's pig coronary
+    # arteries) or "other" (it does not); None: organ_of decides (a mask with one inlet is "other").
+    # Read by the reduction only: the tree does not depend on it.
+    organ: Optional[str] = None
 
 
 @dataclass
@@ -274,6 +283,19 @@ class RunConfig(Settings):
     # What the command does: "run" the sweep (then reduce it), or only "reduce" the runs
     # already in output_dir (+stage=reduce). Not part of a run's identity (sweep.py drops it).
     stage: str = "run"
+
+
+def organ_of(tissue: str, organ: Optional[str], n_inlets: int) -> str:
+    """``tissue.organ`` as the reduction reads it: "heart" (compared with Kassab's pig coronary
+    arteries) or "other".
+
+    Unset (None): a heart for ``tissue=heart`` and for the shapes (sphere, box, plane2d: the test
+    domains, reduced as stand-ins for the heart as they always were), and for a mask with two or
+    more inlets (the coronary ostia: a heart's label map); "other" for a mask with one inlet.
+    """
+    if organ is not None:
+        return organ
+    return "other" if tissue == "mask" and n_inlets < 2 else "heart"
 
 
 def to_run_config(cfg: Any) -> RunConfig:
@@ -392,6 +414,11 @@ def validate(cfg: RunConfig) -> RunConfig:
         )
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    if cfg.tissue.organ is not None and cfg.tissue.organ not in ORGANS:
+        raise ConfigError(
+            f"tissue.organ must be one of {', '.join(ORGANS)}, or null (decided by the tissue), "
+            f"got {cfg.tissue.organ!r}"
+        )
     if cfg.tissue.inlet_assignment not in INLET_ASSIGNMENTS:
         raise ConfigError(
             f"tissue.inlet_assignment must be one of {', '.join(INLET_ASSIGNMENTS)}, "

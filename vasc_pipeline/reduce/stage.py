@@ -10,8 +10,9 @@ Cells are the grid points without the seed: (tissue, n_terminals, m_b, steps). I
 cell the complete run with the lowest final annealed cost (``attrs["cost"]["total"]``)
 is the cell's tree (:mod:`vasc_pipeline.reduce.runs`); its morphometry
 (:func:`vasc_pipeline.reduce.morphometry.morphometry`, orders shifted so that the highest is 11) is
-compared with Kassab et al. 1993. The summary's schema is :mod:`vasc_pipeline.reduce.summary`'s;
-this module writes it, derives the comparison tables (``comparison.csv``,
+compared with Kassab et al. 1993 when the tissue is a heart (``tissue.organ``; the comparison's
+table, CSVs, summary groups and figure panels are left out otherwise). The summary's schema is
+:mod:`vasc_pipeline.reduce.summary`'s; this module writes it, derives the comparison tables (``comparison.csv``,
 ``comparison_summary.csv`` and the printed table) from it, and calls the exports and figures.
 """
 
@@ -71,9 +72,9 @@ class Reduction:
     summary_path: Path
     best: dict[tuple, RunInfo]
     cell_dims: list[str]
-    comparison: pd.DataFrame
-    comparison_csv: Path
-    comparison_summary_csv: Path
+    comparison: pd.DataFrame | None  # None (and no CSVs) for a tissue that is no heart (tissue.organ)
+    comparison_csv: Path | None
+    comparison_summary_csv: Path | None
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
     removed: list[Path] = field(default_factory=list)  # superseded tree exports and figures
@@ -264,13 +265,22 @@ def reduce(
     check_one_configuration(out, runs)
     summary, best, dims = build_summary(runs, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
-    frame = comparison_frame(summary)
-    csv = _write_csv(frame, out / COMPARISON_CSV)
-    csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+    frame = csv = csv_summary = None
+    if "comparison" in summary.children:
+        frame = comparison_frame(summary)
+        csv = _write_csv(frame, out / COMPARISON_CSV)
+        csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+        stream.write(format_comparison(summary) + "\n")
+    else:
+        for stale in (out / COMPARISON_CSV, out / COMPARISON_SUMMARY_CSV):  # an earlier reduction's, not of these runs
+            stale.unlink(missing_ok=True)
+        stream.write(
+            "No comparison with Kassab et al. 1993 (pig coronary arteries): tissue.organ is other (set so, or a "
+            "mask with one inlet); tissue.organ=heart compares the trees with them.\n"
+        )
     result = Reduction(
         out, summary, summary_path, best, dims, frame, csv, csv_summary, skipped=skipped, damaged=damaged
     )
-    stream.write(format_comparison(summary) + "\n")
     result.removed = remove_superseded_outputs(out, best)
     if exports:
         from .export import export_run
@@ -290,8 +300,9 @@ def reduce(
     lines = [
         f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
         f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
-        f"  comparison: {csv}, {csv_summary}",
     ]
+    if csv is not None:
+        lines.append(f"  comparison: {csv}, {csv_summary}")
     if result.trees:
         lines.append(
             f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv, .0d.json for svZeroDSolver)"
