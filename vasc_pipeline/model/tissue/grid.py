@@ -83,11 +83,16 @@ class TissueError(ValueError):
     """A tissue configuration that cannot be built; the message names the field."""
 
 
-def check_voxel_scale(tissue: Tissue, supply_radius: float, n_terminals: int) -> None:
-    """Refuse (TissueError) a voxel size the model cannot use: one coarser than the supply sphere
-    (the supply term counts the voxels within R_supply of a terminal: it needs several), and, on
-    a user's grid (:attr:`Tissue.voxel_size_from` set: ``tissue=mask``), voxels or a tissue at a
-    scale no organ has (:data:`MASK_VOXEL_RANGE`, :data:`MASK_EXTENT_RANGE`)."""
+def check_voxel_scale(tissue: Tissue, supply_radius: float | None = None, n_terminals: int | None = None) -> None:
+    """Refuse (TissueError) a voxel size the model cannot use: on a user's grid
+    (:attr:`Tissue.voxel_size_from` set: ``tissue=mask``) voxels or a tissue at a scale no organ
+    has (:data:`MASK_VOXEL_RANGE`, :data:`MASK_EXTENT_RANGE`), and, given the supply radius
+    [m], one coarser than the supply sphere (the supply term counts the voxels within R_supply
+    of a terminal: it needs several).
+
+    A :class:`Tissue` checks the first itself, before its inlets (which a grid in the wrong unit
+    misplaces); :func:`vasc_pipeline.engine.build_problem` checks both once R_supply is known.
+    """
     h = float(tissue.voxel_size)
     given = tissue.voxel_size_from
     if given is not None:
@@ -102,8 +107,10 @@ def check_voxel_scale(tissue: Tissue, supply_radius: float, n_terminals: int) ->
                 f"{given} gives voxels of {h * 1e3:.4g} mm, outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the voxel "
                 f"edges of images of organs (micro-CT to clinical CT and MRI): {unit}"
             )
-        occupied = np.argwhere(tissue.mask)
-        voxels = int((occupied.max(axis=0) - occupied.min(axis=0)).max()) + 1
+        voxels = 0
+        for axis in range(3):  # the tissue's extent along each axis, from its projections (no copy per voxel)
+            occupied = np.flatnonzero(tissue.mask.any(axis=tuple(a for a in range(3) if a != axis)))
+            voxels = max(voxels, int(occupied[-1] - occupied[0]) + 1)
         extent = voxels * h
         lo, hi = MASK_EXTENT_RANGE
         if not lo <= extent <= hi:
@@ -112,7 +119,7 @@ def check_voxel_scale(tissue: Tissue, supply_radius: float, n_terminals: int) ->
                 f"of {h * 1e3:.4g} mm), outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the sizes of organs (a zebrafish "
                 f"heart to a whole human body): {unit}"
             )
-    if supply_radius / h < 1.0:
+    if supply_radius is not None and supply_radius / h < 1.0:
         what = f"tissue.voxel_size={h:.4g} m" if given is None else f"{given}: voxels of {h * 1e3:.4g} mm"
         raise TissueError(
             f"{what} is coarser than the supply sphere (R_supply = {supply_radius:.4g} m at n_terminals="
@@ -254,6 +261,8 @@ class Tissue:
             raise TissueError(f"tissue.voxel_size must be a positive length in metres, got {self.voxel_size}")
         if self.ndim == 2 and self.mask.shape[0] != 1:
             raise TissueError("a 2-D tissue has exactly one voxel layer")
+        if self.voxel_size_from is not None:
+            check_voxel_scale(self)
         if self.exclusion is None:
             self.exclusion = self.mask.copy()
         else:

@@ -213,10 +213,10 @@ def mask(
     h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
     if h is None or not float(h) > 0:
         raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
-    if voxel_size is not None:
-        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
-    elif images.is_label_map(path):
+    if images.is_label_map(path):  # a config's voxel_size is the header's (a run records the value taken)
         voxel_size_from = f"the header of tissue.path ({path!r})"
+    elif voxel_size is not None:
+        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
     else:
         voxel_size_from = f"the voxel_size attribute of tissue.path ({path!r})"
     org = np.asarray(org, dtype=np.float64)
