@@ -228,7 +228,7 @@ def write_heart(path, n_terminals: int = 200) -> tuple[Path, Path]:
 
 
 if __name__ == "__main__":  # the former command; runpy warns here, the package's own entry does not
-    from .__main__ import main
+    import runpy
 
     print("vasc_pipeline: the command is now python -m vasc_pipeline.model.tissue", file=sys.stderr)
-    sys.exit(main())
+    runpy.run_module("vasc_pipeline.model.tissue", run_name="__main__", alter_sys=True)
