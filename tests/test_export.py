@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import xml.etree.ElementTree as ET
 
@@ -10,7 +11,8 @@ import pandas as pd
 import pytest
 
 from vasc_pipeline import config, job, store, sweep
-from vasc_pipeline.reduce.export import export_run, export_tree, terminals_downstream, tree_table
+from vasc_pipeline.reduce import zerod
+from vasc_pipeline.reduce.export import export_paths, export_run, export_tree, terminals_downstream, tree_table
 
 GAMMA = 3.0
 R_T = 1e-4
@@ -104,8 +106,12 @@ def test_export_run_of_a_complete_store_and_refusal_of_a_running_one(tmp_path):
     with pytest.raises(store.StoreError, match="running"):
         export_run(running.path, tmp_path / "out")
     job.run_job(j)
-    vtp, csv = export_run(j.store, tmp_path / "out")
+    vtp, csv, network = export_run(j.store, tmp_path / "out")  # what the reduction writes, in one call
     assert vtp.name == f"{j.run_id}.vtp" and csv.name == f"{j.run_id}.csv"
+    assert network == zerod.zero_d_path(tmp_path / "out", j.run_id)
+    assert json.loads(network.read_text()) == json.loads(zerod.export_run(j.store, tmp_path / "zerod").read_text())
+    assert export_run(j.store, tmp_path / "plain", zero_d=False) == export_paths(tmp_path / "plain", j.run_id)
+    assert not zerod.zero_d_path(tmp_path / "plain", j.run_id).exists()
     tree = job.read_final_tree(j.store)
     piece, point, cell, points, lines = vtp_arrays(vtp)
     assert int(piece.get("NumberOfPoints")) == 32 and int(piece.get("NumberOfLines")) == 31

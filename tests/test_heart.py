@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import inspect
+import json
 import logging
 from dataclasses import asdict
 
 import numpy as np
 import pytest
+from helpers import make_problem
 from scipy import ndimage
 
+from vasc_pipeline import engine
 from vasc_pipeline.config import (
     TISSUE_KEYS_OF_EVERY_TISSUE,
     ConfigError,
@@ -263,7 +266,6 @@ def test_ostium_height_places_both_ostia_above_the_base_in_metres(dims):
             ],
             r"tissue.exclude_cavities .* tissue=mask ignores it: .*\(true\)",
         ),
-        (["tissue.inlets=[[0,0,0.01]]"], r"tissue.inlets is read by tissue=mask only; tissue=heart ignores it"),
         (["tissue.radius=0.03"], r"tissue.radius is read by tissue=sphere only"),
         (["tissue=sphere", "tissue.size=[0.02,0.02,0.02]"], r"tissue.size is read by tissue=box only"),
         (["tissue=box", "tissue.side=0.2"], r"tissue.side is read by tissue=plane2d only"),
@@ -351,3 +353,96 @@ def test_bad_heart_options_are_refused_before_any_job(tmp_path, key, value, mess
         with pytest.raises(TissueError, match=message):
             plan(compose([f"tissue.{key}={value}", f"output_dir={tmp_path / 'out'}", "n_terminals=300"]))
         assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_reports_the_heart_mass_once(caplog, tmp_path):
+    """Planning builds the heart (and its exclusion grid's twin at tissue.exclusion_voxel_size), the
+    kernels' warm-up builds it again: the achieved mass is reported once, for the supply grid."""
+    from vasc_pipeline.pipeline import orchestrate, planning
+
+    cfg = compose(["n_terminals=16", "anneal.steps=600", "anneal.trace_every=300", f"output_dir={tmp_path}"])
+    with caplog.at_level(logging.INFO, logger="vasc_pipeline.model.tissue.heart"):
+        p = planning.plan(cfg)
+        orchestrate.compile_kernels(p.jobs)
+    reports = [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO and "myocardium" in r.getMessage()]
+    supply_mm = build_tissue("heart", 16).voxel_size * 1e3
+    assert len(reports) == 1 and f"voxels of {supply_mm:.3g} mm" in reports[0], reports
+
+
+def test_ostia_on_the_base_plane_open_onto_the_cavity_and_are_accepted():
+    """At ostium_height=0 the LCA lies on the base plane over the LV's cavity: in a cavity voxel of
+    the top layer, whose face opens onto the space above the base. Not inside the cavity."""
+    t = heart.heart_tissue(200, ostium_height=0.0)
+    assert t.contains(t.inlets, t.cavity)[0]
+    np.testing.assert_array_equal(t.inlets[:, 2], 0.0)
+
+
+# -- own inlets (ostia) on every tissue ---------------------------------------------------------
+
+
+def inlets_override(points) -> str:
+    """``tissue.inlets=[[x,y,z],...]`` with every float exact (repr round-trips)."""
+    return "tissue.inlets=[" + ",".join("[" + ",".join(repr(float(v)) for v in p) + "]" for p in points) + "]"
+
+
+@pytest.mark.parametrize(
+    "name, points",
+    [
+        ("heart", [[0.03, 0.0, 0.004]]),  # one ostium, beside the base
+        ("sphere", [[0.0, 0.021, 0.0], [0.0, -0.021, 0.0]]),  # two, either side of the ball
+        ("box", [[0.0, 0.0, 0.0]]),  # a corner of the block
+        ("plane2d", [[0.1, 0.1, 0.0]]),  # the far corner
+    ],
+)
+def test_own_inlets_replace_the_tissues_and_keep_its_grid(tmp_path, name, points):
+    n = "n_terminals=64" if name == "plane2d" else "n_terminals=16"
+    default = make_problem(f"tissue={name}", n).tissue
+    own = make_problem(f"tissue={name}", n, inlets_override(points)).tissue
+    np.testing.assert_array_equal(own.inlets, points)
+    assert own.inlet_names == tuple(f"inlet{k}" for k in range(len(points)))
+    np.testing.assert_array_equal(own.mask, default.mask)  # the tissue and its grid are the tissue's own
+    np.testing.assert_array_equal(own.origin, default.origin)
+    np.testing.assert_array_equal(own.distance, default.distance)
+    named = tmp_path / "ostia.json"
+    named.write_text(json.dumps({f"ostium{k}": p for k, p in enumerate(points)}))
+    from_file = make_problem(f"tissue={name}", n, f"tissue.inlets_path={named}").tissue
+    np.testing.assert_array_equal(from_file.inlets, points)
+    assert from_file.inlet_names == tuple(f"ostium{k}" for k in range(len(points)))
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (
+            ["tissue.inlets=[[0.5,0,0]]"],
+            r"^tissue\.inlets: inlet 0 \(inlet0\) at \[500, 0, 0\] mm lies outside the voxel grid",
+        ),
+        (["tissue=sphere", "tissue.inlets=[[0,0,0.05]]"], r"^tissue\.inlets: inlet 0 .* lies outside the voxel grid"),
+        (["tissue=plane2d", "tissue.inlets=[[0.05,0.05,0.001]]"], r"lies outside .* \(the plane of a 2-D tissue\)"),
+        (["tissue.inlets=[]"], r"tissue\.inlets must hold at least one \[x, y, z\] position"),
+        (["tissue.ostium_height=0.01", "tissue.inlets=[[0,0,0.01]]"], r"ostia, which tissue\.inlets replaces: set one"),
+        (["tissue=box", "tissue.inlets=[[0,0]]"], r"tissue\.inlets\[0\] must be an \[x, y, z\] position"),
+        (
+            ["tissue.inlets=[[0.0,0.0,-0.03]]"],
+            r"^tissue\.inlets: inlet 0 \(inlet0\) at \[0, 0, -30\] mm lies inside a cavity",
+        ),
+    ],
+)
+def test_own_inlets_out_of_the_box_or_in_a_cavity_are_refused(overrides, message):
+    with pytest.raises((TissueError, ConfigError), match=message):
+        make_problem("n_terminals=16", *overrides)
+
+
+def test_own_inlets_at_the_hearts_ostia_give_todays_tree_bit_for_bit():
+    """tissue.inlets set to the heart's own ostia (the floats its builder computes) is today's run,
+    and tissue.inlets unset leaves the config's identity as it was."""
+    run = ("n_terminals=24", "anneal.steps=3000", "anneal.trace_every=1000")
+    ostia = build_tissue("heart", 24).inlets
+    today = engine.run(compose(list(run)), seed=3)
+    own = engine.run(compose([*run, inlets_override(ostia)]), seed=3)
+    np.testing.assert_array_equal(own.tree.parent, today.tree.parent)
+    np.testing.assert_array_equal(own.tree.position, today.tree.position)
+    assert own.costs == today.costs
+    unset = config_hash(asdict(compose(list(run))))
+    assert unset == config_hash(asdict(compose([*run, "tissue.inlets=null", "tissue.inlets_path=null"])))
+    assert unset != config_hash(asdict(compose([*run, inlets_override(ostia)])))  # given, they are part of it

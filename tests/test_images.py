@@ -100,10 +100,12 @@ def test_anisotropic_and_oblique_images_are_refused_with_their_geometry(tmp_path
 
 def test_the_shipped_heart_round_trips_through_a_label_map(tmp_path):
     code = subprocess.run(
-        [sys.executable, "-m", "vasc_pipeline.model.tissue.images", str(tmp_path / "heart.nii.gz"), "200"],
+        [sys.executable, "-m", "vasc_pipeline.model.tissue", str(tmp_path / "heart.nii.gz"), "200"],
         env=ENV, cwd=REPO, capture_output=True, text=True, timeout=240,
     )  # fmt: skip
     assert code.returncode == 0, code.stderr
+    assert "Warning" not in code.stderr, code.stderr  # runpy's "found in sys.modules" above all
+    assert code.stdout.split() == [str(tmp_path / "heart.nii.gz"), str(tmp_path / "heart.inlets.json")]
     inlets = tmp_path / "heart.inlets.json"
     assert set(json.loads(inlets.read_text())) == {"LCA", "RCA"}
     heart = build_tissue("heart", 200)
@@ -126,7 +128,7 @@ def test_the_shipped_heart_round_trips_through_a_label_map(tmp_path):
 
 def test_a_run_on_a_label_map_through_the_config(tmp_path):
     path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
-    (tmp_path / "inlets.csv").write_text("name,x,y,z\nroot,0.002,0.03,0.013\n")
+    (tmp_path / "inlets.csv").write_text("name,x,y,z\nroot,0.002,0.03,0.021\n")  # just above the shell
     problem = make_problem(
         "tissue=mask",
         f"tissue.path={path}",
@@ -153,3 +155,99 @@ def test_bad_labels_and_contradicting_keys_name_the_field(tmp_path):
         make_problem(*base, "tissue.voxel_size=0.001")
     with pytest.raises(ConfigError, match=r"tissue\.labels is read by tissue=mask only"):
         make_problem("tissue=sphere", "tissue.labels.supply=[1]")
+
+
+# -- inputs that read badly or passed silently ---------------------------------------------
+
+
+def test_a_file_of_no_format_read_lists_the_formats(tmp_path):
+    script = tmp_path / "make.py"
+    script.write_text("print('not a mask')\n")
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for path in (script, folder):
+        with pytest.raises(TissueError) as err:
+            make_problem("tissue=mask", f"tissue.path={path}", "tissue.voxel_size=1e-3", "tissue.inlets=[[0,0,0]]")
+        text = str(err.value)
+        assert text.startswith(f"tissue.path: {str(path)!r} is ") and "No group found" not in text, text
+        for accepted in (".npy", "Zarr", ".nii.gz", ".nrrd"):
+            assert accepted in text, text
+
+
+def test_a_damaged_label_map_says_so(tmp_path):
+    good = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    nrrd.write(str(tmp_path / "m.nrrd"), labels_zyx().transpose(2, 1, 0), {"space directions": np.eye(3) * 2.0})
+    raw = (tmp_path / "m.nrrd").read_bytes()
+    cases = {
+        "cut.nrrd": raw[: raw.index(b"sizes")] + b"sizes 13\n",  # a header line without its colon
+        "half.nrrd": raw[: len(raw) // 2],
+        "cut.nii.gz": good.read_bytes()[:100],
+    }
+    for name, content in cases.items():
+        (tmp_path / name).write_bytes(content)
+        kind = "NRRD" if name.endswith(".nrrd") else "NIfTI"
+        with pytest.raises(TissueError) as err:
+            make_problem("tissue=mask", f"tissue.path={tmp_path / name}", "tissue.inlets=[[0,0,0]]")
+        text = str(err.value)
+        assert f"tissue.path: {str(tmp_path / name)!r} is not a readable {kind} label map" in text, text
+        assert "damaged" in text and "truncated" in text, text
+
+
+def test_an_inlet_from_a_file_outside_the_grid_names_the_file_in_mm(tmp_path):
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    inlets = tmp_path / "ostia.json"
+    inlets.write_text(json.dumps({"LCA": [-0.03, 0.03, 0.013]}))  # x far left of the grid
+    with pytest.raises(TissueError) as err:
+        make_problem("tissue=mask", f"tissue.path={path}", f"tissue.inlets_path={inlets}", "n_terminals=12")
+    text = str(err.value)
+    where = f"tissue.inlets_path ({str(inlets)!r}): inlet 0 (LCA) at [-30, 30, 13] mm lies outside"
+    assert text.startswith(where), text
+    assert "0.030000000000000002" not in text and "box, x [-11, 15], y [19, 41], z [4, 22] mm" in text, text
+
+
+@pytest.mark.parametrize("role", ["exclusion", "open"])
+def test_labels_absent_from_the_map_are_refused_in_every_role(tmp_path, role):
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    base = ("tissue=mask", f"tissue.path={path}", "tissue.inlets=[[0.0,0.03,0.02]]", "n_terminals=12")
+    absent = rf"tissue\.labels\.{role}: no voxel of .* holds the labels \[7\] \(its labels: \[0, 1, 2\]\)"
+    with pytest.raises(TissueError, match=absent):
+        make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[7]")
+    with pytest.raises(TissueError, match=rf"tissue\.labels\.{role}: no voxel .* holds the labels \[7\]"):
+        make_problem(*base, "tissue.labels.supply=[1]", f"tissue.labels.{role}=[2,7]")  # one of them absent
+
+
+def test_a_label_map_whose_header_gives_metre_voxels_is_refused_naming_the_file(tmp_path):
+    """A 1000 mm voxel (a header in the wrong unit): a 26 m organ, which would run to exit 0."""
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), 1.0, ORIGIN * 500)
+    with pytest.raises(TissueError) as err:
+        make_problem("tissue=mask", f"tissue.path={path}", "tissue.inlets=[[0.0,15.0,10.0]]", "n_terminals=12")
+    text = str(err.value)
+    assert text.startswith(f"the header of tissue.path ({str(path)!r}) gives voxels of 1000 mm, outside "), text
+    assert "[0.001, 10] mm" in text and "unit" in text, text
+
+
+def test_an_inlet_inside_an_excluded_cavity_is_refused(tmp_path):
+    """An ostium lies in the tissue or the open space next to it (the heart's lie above the base,
+    outside the myocardium); inside a cavity its root segment could not leave without crossing it."""
+    path = img.write_label_map(tmp_path / "m.nii.gz", labels_zyx(), H, ORIGIN)
+    centre = (ORIGIN + H * np.array([6, 5, 4])).tolist()  # label 2, the cavity
+    shell = (ORIGIN + H * np.array([6, 5, 7])).tolist()  # label 1, the tissue
+    above = (ORIGIN + H * np.array([6, 5, 8])).tolist()  # label 0, outside
+    base = ("tissue=mask", f"tissue.path={path}", "n_terminals=12")
+    inlets = f"tissue.inlets=[{above},{centre}]".replace(" ", "")
+    with pytest.raises(TissueError) as err:
+        make_problem(*base, "tissue.labels.supply=[1]", "tissue.labels.exclusion=[2]", inlets)
+    text = str(err.value)
+    assert text.startswith("tissue.inlets: inlet 1 (inlet1) at [2, 30, 13] mm lies inside a cavity of the"), text
+    # the same cavity given as a mask of its own (tissue.exclusion_path)
+    labels = labels_zyx()
+    np.save(tmp_path / "tissue.npy", (labels == 1).astype(np.uint8))
+    np.save(tmp_path / "cavity.npy", (labels == 2).astype(np.uint8))
+    own = ("tissue=mask", f"tissue.path={tmp_path / 'tissue.npy'}", f"tissue.voxel_size={H!r}", "n_terminals=12")
+    own += (f"tissue.origin={ORIGIN.tolist()}".replace(" ", ""), f"tissue.exclusion_path={tmp_path / 'cavity.npy'}")
+    with pytest.raises(TissueError, match=r"tissue\.inlets: inlet 0 .* lies inside a cavity"):
+        make_problem(*own, f"tissue.inlets=[{centre}]".replace(" ", ""))
+    for fine in (shell, above):  # in the tissue or outside it: accepted
+        make_problem(*own, f"tissue.inlets=[{fine}]".replace(" ", ""))
+    # without an exclusion role the label is plain tissue (every nonzero label): accepted
+    make_problem(*base, f"tissue.inlets=[{centre}]".replace(" ", ""))

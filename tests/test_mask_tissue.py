@@ -136,3 +136,27 @@ def test_a_terminal_sites_path_that_is_a_directory_names_the_field(tmp_path):
 
     with pytest.raises(TreeError, match=r"terminals\.path: cannot read .*Is a directory"):
         load_terminal_sites(str(tmp_path), tissue=None)
+
+
+@pytest.mark.parametrize(
+    "shape, voxel, message",
+    [
+        # a voxel edge given in millimetres where metres are meant: a 20 m organ
+        ((20, 20, 20), 1.0, r"tissue\.voxel_size=1 \(for tissue\.path '.*tissue\.npy'\) gives voxels of 1000 mm, "),
+        ((20, 20, 20), 2e-8, r"gives voxels of 2e-05 mm, outside \[0\.001, 10\] mm"),
+        # plausible voxels, but an organ 3 m long
+        ((3, 3, 600), 5e-3, r"the tissue of .*tissue\.npy. an extent of 3000 mm \(600 voxels of 5 mm\), outside "),
+        ((2, 2, 2), 4e-5, r"an extent of 0\.08 mm \(2 voxels of 0\.04 mm\), outside \[0\.1, 2000\] mm"),
+    ],
+)
+def test_a_mask_at_a_scale_no_organ_has_is_refused(tmp_path, shape, voxel, message):
+    data = np.ones(shape, dtype=np.uint8)
+    np.save(tmp_path / "tissue.npy", data)
+    inlet = [0.0, 0.0, 0.0]
+    with pytest.raises(tissue.TissueError, match=message):
+        make_problem(*overrides(tmp_path / "tissue.npy", inlet, f"tissue.voxel_size={voxel!r}", "n_terminals=4"))
+
+
+def test_a_sphere_with_a_voxel_wider_than_the_supply_sphere_is_still_refused():
+    with pytest.raises(tissue.TissueError, match=r"tissue\.voxel_size=0\.05 m is coarser than the supply sphere"):
+        make_problem("tissue=sphere", "tissue.voxel_size=0.05")

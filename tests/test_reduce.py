@@ -15,6 +15,7 @@ import socket
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -220,7 +221,7 @@ def test_comparison_table_stored_printed_and_csv(swept, summary):
     assert {"inlet_share_root", "terminal_pressure_min_Pa", "bifurcations_off_organ_share"} <= set(summary_csv.columns)
     # printed: one block per cell with the mean |log10 ratio| line and the best tree's anatomy
     assert printed.count("mean |log10 model/Kassab|") == 4
-    assert printed.count("anatomy: terminals") == 4
+    assert printed.count("bifurcations > 2 mm off the organ") == 4
     assert str(morph["best_run_id"].sel(point).values) in printed
 
 
@@ -523,3 +524,56 @@ def test_write_summary_swaps_in_the_new_summary_and_removes_a_crashed_write_s_le
     write_summary(second, path)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([".summary.zarr.lock", "summary.zarr", *kept])
     assert xr.open_datatree(path, engine="zarr")["x"].size == 4
+
+
+# -- tissue.organ: the comparison with the pig heart only for a heart ---------------------------
+
+ONE_RUN = ["+sweep=smoke", "sweep.m_b=[641.3]", "sweep.seeds=[0]", "anneal.steps=5000"]
+
+
+def test_a_tissue_that_is_not_a_heart_is_reduced_without_the_kassab_comparison(tmp_path):
+    out = tmp_path / "shell"
+    run_all(out, *ONE_RUN, "sweep.n_terminals=[16,24]", "tissue.organ=other")
+    (out / "comparison.csv").write_text("left by an earlier reduction\n")  # not this configuration's: removed
+    stream = io.StringIO()
+    result = reduce_mod.reduce(out, stream=stream)
+    printed = stream.getvalue()
+    assert not result.errors, result.errors
+    assert "Kassab" in printed and "tissue.organ is other" in printed, printed  # one line saying why not
+    assert "mean |log10 model/Kassab|" not in printed and "D LAD" not in printed, printed
+    assert result.comparison is None and result.comparison_csv is None and result.comparison_summary_csv is None
+    assert not (out / "comparison.csv").exists() and not (out / "comparison_summary.csv").exists()
+    summary = xr.open_datatree(out / "summary.zarr", engine="zarr")
+    assert {"morphometry", "asymmetry", "costs", "traces"} <= set(summary.children)
+    assert not {"comparison", "kassab"} & set(summary.children)
+    assert summary.attrs["organ"] == "other"
+    names = {p.name for p in result.figures}
+    assert {"morphometry.png", "asymmetry.png", "cost_traces.png", "size_scan.png"} <= names, names
+    assert not {"morphometry_vs_kassab.png", "agreement_vs_n.png"} & names, names
+    for p in result.figures:
+        _png_is_a_real_figure(p, min_shape=(200, 300))
+    assert len(result.trees) == 3 * len(result.best)  # the rest as for a heart
+
+
+def test_which_tissues_are_compared_with_the_pig_heart():
+    organ = config.organ_of
+    assert [organ(t, None, 2) for t in ("heart", "sphere", "box", "plane2d")] == ["heart"] * 4
+    assert organ("mask", None, 2) == "heart" and organ("mask", None, 3) == "heart"  # ostia: a heart's map
+    assert organ("mask", None, 1) == "other"  # one inlet: an organ of another kind
+    assert organ("mask", "heart", 1) == "heart" and organ("heart", "other", 2) == "other"  # as told
+    with pytest.raises(config.ConfigError, match=r"tissue\.organ must be one of heart, other, or null .*got 'liver'"):
+        config.compose(["tissue.organ=liver"])
+    stored = asdict(config.compose([]))
+    del stored["tissue"]["organ"]  # a store written before the key
+    assert store.config_hash(stored) == store.config_hash(asdict(config.compose([])))
+    assert store.config_hash(asdict(config.compose(["tissue.organ=other"]))) != store.config_hash(stored)
+
+
+def test_a_mask_with_one_inlet_is_reduced_without_the_comparison(tmp_path):
+    z, y, x = np.indices((16, 16, 16)) - 7.5
+    np.save(tmp_path / "organ.npy", (x**2 + y**2 + z**2 <= 49).astype(np.uint8))
+    out = tmp_path / "mask"
+    mask = ["tissue=mask", f"tissue.path={tmp_path / 'organ.npy'}", "tissue.voxel_size=0.001"]
+    run_all(out, *ONE_RUN, "sweep.n_terminals=[16]", *mask, "tissue.inlets=[[0.0075,0.0075,0.015]]")
+    result = reduce_mod.reduce(out, stream=io.StringIO(), figures=False)
+    assert result.comparison is None and not (out / "comparison.csv").exists()

@@ -7,6 +7,7 @@ subprocess, otherwise the plain functions run in this process.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.util
 import io
@@ -480,6 +481,28 @@ def test_9_the_dashboard_link_is_printed_only_when_bokeh_can_draw_it(tmp_path):
         assert "no Dask dashboard: it needs bokeh" in log.getvalue()
     else:
         assert "Dask dashboard at http" in log.getvalue()
+
+
+@pytest.mark.parametrize("dashboard", ["127.0.0.1:8787", "null"])
+def test_9_a_taken_dashboard_port_without_bokeh_draws_no_word_from_dask(tmp_path, dashboard):
+    """Without bokeh there is no dashboard: the local cluster asks for no dashboard port, so a
+    port already taken draws no "Hosting the HTTP server on port ... instead" before our note."""
+    import warnings
+
+    if importlib.util.find_spec("bokeh") is not None:
+        pytest.skip("bokeh is installed: the dashboard asked for is drawn, and Dask may move it")
+    with socket.socket() as taken:
+        # Without bokeh, Dask's HTTP server fell back to its own default port whatever the config said
+        with contextlib.suppress(OSError):  # in use already: taken, as the test needs
+            taken.bind(("", 8787))
+            taken.listen()
+        cluster = tiny(tmp_path, f"cluster.dashboard_address={dashboard}").cluster  # the default, or none
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with orchestrate.open_client(cluster, 1) as client:
+                client.wait_for_workers(1, timeout=60)
+    moved = [str(w.message) for w in caught if "already in use" in str(w.message)]
+    assert not moved, moved
 
 
 # -- 10. slurm: checked before any store; the job script without submitting ----------------------

@@ -3,6 +3,7 @@ inputs a user types are accepted or refused by name. Tiny problems, mostly in th
 
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 
@@ -290,3 +291,227 @@ def test_a_refused_input_leaves_no_hydra_logs_behind(tmp_path):
     code, output = finish(cli(*TINY_RUN, f"output_dir={kept}", "physics.gamma=0.01"))
     assert code == 2, output
     assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]
+
+
+# -- 7. label maps and inlets: a batch of bad inputs, each refused by name with exit 2 ----------
+
+LABELS = np.zeros((9, 11, 13), dtype=np.uint8)  # (z, y, x): 1 a shell of tissue, 2 a cavity inside it
+_z, _y, _x = np.indices(LABELS.shape)
+_r = np.sqrt((_x - 6.0) ** 2 + (_y - 5.0) ** 2 + ((_z - 4.0) * 1.3) ** 2)
+LABELS[_r <= 5.0] = 1
+LABELS[_r <= 2.5] = 2
+IN_CAVITY = "[[0.006,0.005,0.004]]"  # voxel (6, 5, 4): the cavity's centre (origin 0, 1 mm voxels)
+ABOVE = "[[0.006,0.005,0.008]]"  # voxel (6, 5, 8): outside the shell, above it
+
+
+@pytest.fixture(scope="module")
+def bad_inputs(tmp_path_factory):
+    """The files the cases below name: label maps (NIfTI, NRRD), .npy masks, inlet files."""
+    d = tmp_path_factory.mktemp("inputs")
+    np.save(d / "labels.npy", LABELS)
+    np.save(d / "empty.npy", np.zeros((4, 4, 4), dtype=np.uint8))
+    np.save(d / "line.npy", np.ones(7, dtype=np.uint8))
+    nan = np.ones((4, 4, 4))
+    nan[1, 2, 3] = np.nan
+    np.save(d / "nan.npy", nan)
+    np.save(d / "long.npy", np.ones((3, 3, 600), dtype=np.uint8))
+    np.save(d / "other_grid.npy", np.ones((5, 5, 5), dtype=np.uint8))
+    (d / "text.npy").write_text("0,1,1\n1,1,0\n")
+    (d / "make.py").write_text("print('a script, not a mask')\n")
+    (d / "scans").mkdir()
+    (d / "ostia.json").write_text('{"LCA": [0.006, 0.005, 0.008]}')
+    (d / "far.json").write_text('{"LCA": [-0.03, 0.005, 0.008]}')
+    (d / "cavity.json").write_text('{"LCA": [0.006, 0.005, 0.004]}')
+    (d / "broken.json").write_text('{"LCA": [0.006, 0.005')
+    (d / "two.json").write_text('{"LCA": [0.006, 0.005]}')
+    (d / "columns.csv").write_text("a,b,c\n1,2,3\n")
+    try:
+        import nibabel
+        import nrrd
+        from vasc_pipeline.tissue import images
+    except ImportError:  # the label-map cases skip themselves
+        return d
+    images.write_label_map(d / "heart.nii.gz", LABELS, 1e-3, [0.0, 0.0, 0.0])
+    images.write_label_map(d / "metres.nii.gz", LABELS, 1.0, [0.0, 0.0, 0.0])  # a header in the wrong unit
+    images.write_label_map(d / "tiny.nii.gz", LABELS, 1e-8, [0.0, 0.0, 0.0])
+    (d / "cut.nii.gz").write_bytes((d / "heart.nii.gz").read_bytes()[:90])
+    xyz = LABELS.transpose(2, 1, 0)
+    nibabel.save(nibabel.Nifti1Image(xyz, np.diag([1.0, 1.0, 1.5, 1.0])), d / "aniso.nii")
+    c, s = np.cos(0.3), np.sin(0.3)
+    oblique = np.eye(4)
+    oblique[:2, :2] = [[c, -s], [s, c]]
+    nibabel.save(nibabel.Nifti1Image(xyz, oblique), d / "oblique.nii")
+    nrrd.write(str(d / "heart.nrrd"), xyz, {"space directions": np.eye(3), "space": "right-anterior-superior"})
+    raw = (d / "heart.nrrd").read_bytes()
+    (d / "cut.nrrd").write_bytes(raw[: len(raw) // 2])
+    (d / "garbled.nrrd").write_bytes(b"NRRD0004\nhello\n")
+    nrrd.write(str(d / "flat.nrrd"), xyz[:, :, 0])  # 2-D, no spatial frame
+    return d
+
+
+NPY = ("tissue=mask", "tissue.path={d}/labels.npy", "tissue.voxel_size=0.001", "tissue.origin=[0.0,0.0,0.0]")
+NII = ("tissue=mask", "tissue.path={d}/heart.nii.gz")
+ROLES = ("tissue.labels.supply=[1]", "tissue.labels.exclusion=[2]")
+# (overrides, the words the refusal must hold, needs nibabel/pynrrd); every case one mistake
+BAD_INPUTS = [
+    # label maps: scale and geometry
+    ((*NII[:1], "tissue.path={d}/metres.nii.gz", f"tissue.inlets={ABOVE}"), "the header of tissue.path", True),
+    ((*NII[:1], "tissue.path={d}/tiny.nii.gz", f"tissue.inlets={ABOVE}"), "gives voxels of 1e-05 mm", True),
+    ((*NII, "tissue.voxel_size=0.002", f"tissue.inlets={ABOVE}"), "tissue.voxel_size=0.002 contradicts", True),
+    ((*NII, "tissue.origin=[0.0,0.0,0.001]", f"tissue.inlets={ABOVE}"), "tissue.origin=[0.0, 0.0, 0.001] contra", True),
+    ((*NII[:1], "tissue.path={d}/aniso.nii", f"tissue.inlets={ABOVE}"), "anisotropic voxels", True),
+    ((*NII[:1], "tissue.path={d}/oblique.nii", f"tissue.inlets={ABOVE}"), "has an oblique grid", True),
+    ((*NII[:1], "tissue.path={d}/cut.nii.gz", f"tissue.inlets={ABOVE}"), "is not a readable NIfTI label map", True),
+    ((*NII[:1], "tissue.path={d}/cut.nrrd", f"tissue.inlets={ABOVE}"), "is not a readable NRRD label map", True),
+    ((*NII[:1], "tissue.path={d}/garbled.nrrd", f"tissue.inlets={ABOVE}"), "is not a readable NRRD label map", True),
+    ((*NII[:1], "tissue.path={d}/flat.nrrd", f"tissue.inlets={ABOVE}"), "has no 3-D 'space directions'", True),
+    # label maps: labels by role
+    ((*NII, f"tissue.inlets={ABOVE}", "tissue.labels.exclusion=[7]"), "tissue.labels.exclusion: no voxel", True),
+    ((*NII, f"tissue.inlets={ABOVE}", *ROLES, "tissue.labels.open=[9]"), "tissue.labels.open: no voxel", True),
+    ((*NII, f"tissue.inlets={ABOVE}", "tissue.labels.supply=[5]"), "tissue.labels.supply: no voxel", True),
+    (
+        (*NII, f"tissue.inlets={ABOVE}", "tissue.labels.supply=[1,5]"),
+        "holds the labels [5] (its labels: [0, 1, 2])",
+        True,
+    ),
+    (
+        (*NII, f"tissue.inlets={ABOVE}", "tissue.labels.supply=[1,2]", "tissue.labels.exclusion=[2]"),
+        "label 2 is both supply and exclusion",
+        True,
+    ),
+    ((*NII, f"tissue.inlets={ABOVE}", "tissue.labels.open=[]"), "tissue.labels.open must be a non-empty list", True),
+    ((*NII, f"tissue.inlets={ABOVE}", "tissue.labels.exclusion=[-1]"), "integer label values >= 0", True),
+    (
+        (*NII, f"tissue.inlets={ABOVE}", *ROLES, "tissue.exclusion_path={d}/labels.npy"),
+        "tissue.labels.exclusion and tissue.exclusion_path both",
+        True,
+    ),
+    ((*NPY, "tissue.inlets_path={d}/heart.nii.gz"), "tissue.inlets_path: cannot read inlets from", True),
+    # masks that are no masks, or at no organ's scale
+    (("tissue=mask", "tissue.path={d}/make.py", f"tissue.inlets={ABOVE}"), "is not a mask this reads; accepted", False),
+    (("tissue=mask", "tissue.path={d}/scans", f"tissue.inlets={ABOVE}"), "is a directory but not a Zarr store", False),
+    (("tissue=mask", "tissue.path={d}/nowhere.npy", f"tissue.inlets={ABOVE}"), "does not exist", False),
+    (
+        ("tissue=mask", "tissue.path={d}/empty.npy", "tissue.voxel_size=0.001", f"tissue.inlets={ABOVE}"),
+        "is empty",
+        False,
+    ),
+    (
+        ("tissue=mask", "tissue.path={d}/line.npy", "tissue.voxel_size=0.001", f"tissue.inlets={ABOVE}"),
+        "2-D (y, x)",
+        False,
+    ),
+    (("tissue=mask", "tissue.path={d}/nan.npy", "tissue.voxel_size=0.001", "tissue.inlets=[[0,0,0]]"), "NaN", False),
+    (
+        ("tissue=mask", "tissue.path={d}/text.npy", "tissue.voxel_size=0.001", f"tissue.inlets={ABOVE}"),
+        "a text file",
+        False,
+    ),
+    ((*NPY[:2], "tissue.voxel_size=1.0", f"tissue.inlets={ABOVE}"), "tissue.voxel_size is in metres", False),
+    (
+        (*NPY[:2], "tissue.voxel_size=-0.001", f"tissue.inlets={ABOVE}"),
+        "tissue.voxel_size must be a finite number > 0",
+        False,
+    ),
+    (
+        ("tissue=mask", "tissue.path={d}/long.npy", "tissue.voxel_size=0.005", "tissue.inlets=[[0,0,0]]"),
+        "an extent of 3000 mm",
+        False,
+    ),
+    ((*NPY, f"tissue.inlets={ABOVE}", "tissue.exclusion_path={d}/other_grid.npy"), "they must be the same grid", False),
+    # inlets
+    (
+        (*NPY, "tissue.inlets=[[0.5,0.005,0.008]]"),
+        "tissue.inlets: inlet 0 (inlet0) at [500, 5, 8] mm lies outside",
+        False,
+    ),
+    (
+        (*NPY, *ROLES, f"tissue.inlets={IN_CAVITY}"),
+        "tissue.inlets: inlet 0 (inlet0) at [6, 5, 4] mm lies inside a cavity",
+        False,
+    ),
+    ((*NPY, "tissue.inlets=[]"), "tissue.inlets must hold at least one", False),
+    ((*NPY, "tissue.inlets=[[0.006,0.005]]"), "tissue.inlets[0] must be an [x, y, z] position", False),
+    ((*NPY, "tissue.inlets=[[0.006,0.005,1e999]]"), "must be a finite number", False),
+    ((*NPY[:4],), "tissue.inlets (a list of [x, y, z] positions in metres) or tissue.inlets_path is required", False),
+    ((*NPY, "tissue.inlets_path={d}/nowhere.json"), "tissue.inlets_path: ", False),
+    ((*NPY, "tissue.inlets_path={d}/broken.json"), "tissue.inlets_path: cannot read inlets from", False),
+    ((*NPY, "tissue.inlets_path={d}/two.json"), "must hold one or more finite [x, y, z] positions", False),
+    ((*NPY, "tissue.inlets_path={d}/columns.csv"), "tissue.inlets_path: cannot read inlets from", False),
+    (
+        (*NPY, "tissue.inlets_path={d}/far.json"),
+        "tissue.inlets_path ('{d}/far.json'): inlet 0 (LCA) at [-30, 5, 8] mm",
+        False,
+    ),
+    (
+        (*NPY, *ROLES, "tissue.inlets_path={d}/cavity.json"),
+        "): inlet 0 (LCA) at [6, 5, 4] mm lies inside a cavity",
+        False,
+    ),
+    ((*NPY, f"tissue.inlets={ABOVE}", "tissue.inlets_path={d}/ostia.json"), "both give the inlets: set one", False),
+    ((*NPY, f"tissue.inlets={ABOVE}", "tissue.inlet_share=[0.5,0.5]"), "tissue.inlet_share lists 2 fractions", False),
+    # own inlets on the shaped tissues
+    (
+        ("tissue.inlets=[[0.0,0.0,-0.03]]",),
+        "tissue.inlets: inlet 0 (inlet0) at [0, 0, -30] mm lies inside a cavity",
+        False,
+    ),
+    (("tissue.inlets=[[0.0,0.0,0.5]]",), "tissue.inlets: inlet 0 (inlet0) at [0, 0, 500] mm lies outside", False),
+    (
+        ("tissue.inlets_path={d}/far.json", "tissue.ostium_height=0.01"),
+        "tissue.ostium_height places the heart's",
+        False,
+    ),
+    (("tissue=sphere", "tissue.inlets=[[0.0,0.0,0.05]]"), "lies outside the voxel grid's box", False),
+    (("tissue=plane2d", "tissue.inlets=[[0.05,0.05,0.01]]"), "(the plane of a 2-D tissue)", False),
+    (("tissue=box", "tissue.organ=kidney"), "tissue.organ must be one of heart, other, or null", False),
+]
+
+
+def refused(overrides, out: Path) -> tuple[int, str]:
+    """What ``python -m vasc_pipeline OVERRIDES`` does with them, in this process: the config as Hydra
+    composes it, then the command's own function (exit status, what it printed)."""
+    log = io.StringIO()
+    cfg = config.compose([*overrides, "n_terminals=8", "anneal.steps=2000", f"output_dir={out}"], check=False)
+    return orchestrate.main(cfg, stream=log), log.getvalue()
+
+
+@pytest.mark.parametrize("overrides, words, images", BAD_INPUTS, ids=[f"case{k}" for k in range(len(BAD_INPUTS))])
+def test_a_bad_label_map_or_inlet_exits_2_naming_it(bad_inputs, tmp_path, overrides, words, images):
+    if images:
+        pytest.importorskip("nibabel")
+        pytest.importorskip("nrrd")
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    code, text = refused([o.format(d=bad_inputs) for o in overrides], out)
+    assert code == 2, text
+    assert words.format(d=bad_inputs) in text, text
+    assert "Traceback" not in text and "Existing results were left as they were" in text, text
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+def test_the_batch_is_a_batch():
+    assert len(BAD_INPUTS) >= 30
+
+
+@pytest.mark.parametrize(
+    "overrides, words",
+    [
+        ((*NII, f"tissue.inlets={ABOVE}", "tissue.labels.exclusion=[7]"), "tissue.labels.exclusion: no voxel of"),
+        ((*NPY, *ROLES, f"tissue.inlets={IN_CAVITY}"), "lies inside a cavity"),
+    ],
+)
+def test_the_command_exits_2_and_leaves_the_output_dir_as_it_was(bad_inputs, tmp_path, overrides, words):
+    pytest.importorskip("nibabel")
+    out = tmp_path / "results"
+    (j,) = plan_and_create(mask_overrides_of_labels(bad_inputs, out)).jobs  # a run store already there
+    before = {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    code, output = finish(cli(*[o.format(d=bad_inputs) for o in overrides], "n_terminals=8", f"output_dir={out}"))
+    assert code == 2 and words in output and "Traceback" not in output, output
+    after = {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert after == before and Path(j.store).is_dir()
+
+
+def mask_overrides_of_labels(d: Path, out: Path) -> list[str]:
+    return [o.format(d=d) for o in NPY] + [f"tissue.inlets={ABOVE}", "n_terminals=8", f"output_dir={out}"]

@@ -47,6 +47,8 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "SWEPT_KEYS",
     "sweep_axis",
     "HEART_EXCLUSION_VOXEL_SIZE",
+    "ORGANS",
+    "organ_of",
     "scheduled_steps",
     "packing_steps",
     "CONFIG_DIR",
@@ -88,6 +90,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.exclusion_voxel_size": None,
     "tissue.labels": {"supply": None, "exclusion": None, "open": None},
     "tissue.inlets_path": None,
+    "tissue.organ": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -106,6 +109,7 @@ MODELS = ("paper", "physiological")  # conf/model/: which physics and tissue key
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
 INLET_ASSIGNMENTS = ("random", "nearest")  # which terminals of the initial tree each inlet feeds
+ORGANS = ("heart", "other")  # tissue.organ: the reduction compares a heart's trees with Kassab's pig coronaries
 # Tissue keys that apply to every tissue; each other key is read only by the tissue builders
 # (vasc_pipeline.model.tissue.TISSUES) whose signature names it.
 TISSUE_KEYS_OF_EVERY_TISSUE = (
@@ -116,6 +120,9 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlet_share_tolerance",
     "inlet_assignment",
     "bifurcation_reach",
+    "inlets",
+    "inlets_path",
+    "organ",
 )
 
 
@@ -153,11 +160,13 @@ class TissueConfig(Settings):
     path: Optional[str] = None  # mask: .npy file or Zarr array
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
-    inlets: Optional[list[list[Any]]] = None  # mask: inlet positions [x, y, z], m (numbers; checked by validate)
+    # Inlet positions [x, y, z], m (numbers; checked by validate): a mask's (required, or inlets_path), or
+    # the ostia replacing any other tissue's own (the grid stays the tissue's); None: the tissue's own
+    inlets: Optional[list[list[Any]]] = None
     exclusion_path: Optional[str] = None  # mask: optional second mask (same grid) large vessels must not cross
     exclusion_array: Optional[str] = None  # mask: its array name inside a Zarr group
     labels: LabelsConfig = field(default_factory=LabelsConfig)  # mask: label values by role
-    inlets_path: Optional[str] = None  # mask: inlets from a JSON {name: [x, y, z]} or CSV x, y, z[, name] (m)
+    inlets_path: Optional[str] = None  # as inlets, from a JSON {name: [x, y, z]} or CSV x, y, z[, name] (m)
     # Fraction of the terminals fed by each inlet, in the tissue's inlet order (heart: LCA,
     # RCA); None: free, the anneal finds the split (the paper). Fixed, it is kept exactly.
     inlet_share: Optional[list[float]] = None
@@ -170,6 +179,10 @@ class TissueConfig(Settings):
     # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
     # heart); None: anywhere in the voxel grid's box (the paper).
     bifurcation_reach: Optional[float] = None
+    # What organ the tissue is: "heart" (the reduction compares the trees with Kassab's pig coronary
+    # arteries) or "other" (it does not); None: organ_of decides (a mask with one inlet is "other").
+    # Read by the reduction only: the tree does not depend on it.
+    organ: Optional[str] = None
 
 
 @dataclass
@@ -291,6 +304,19 @@ class RunConfig(Settings):
     stage: str = "run"
 
 
+def organ_of(tissue: str, organ: Optional[str], n_inlets: int) -> str:
+    """``tissue.organ`` as the reduction reads it: "heart" (compared with Kassab's pig coronary
+    arteries) or "other".
+
+    Unset (None): a heart for ``tissue=heart`` and for the shapes (sphere, box, plane2d: the test
+    domains, reduced as stand-ins for the heart as they always were), and for a mask with two or
+    more inlets (the coronary ostia: a heart's label map); "other" for a mask with one inlet.
+    """
+    if organ is not None:
+        return organ
+    return "other" if tissue == "mask" and n_inlets < 2 else "heart"
+
+
 def to_run_config(cfg: Any) -> RunConfig:
     """A :class:`RunConfig` from a RunConfig, a dict or an OmegaConf node (extra keys ignored)."""
     if isinstance(cfg, RunConfig):
@@ -409,6 +435,11 @@ def validate(cfg: RunConfig) -> RunConfig:
         raise ConfigError(f"model.name: unknown model {cfg.model.name!r}; accepted: {', '.join(MODELS)} (model=...)")
     if cfg.tissue.name not in TISSUES:
         raise ConfigError(f"tissue.name: unknown tissue {cfg.tissue.name!r}; accepted: {', '.join(sorted(TISSUES))}")
+    if cfg.tissue.organ is not None and cfg.tissue.organ not in ORGANS:
+        raise ConfigError(
+            f"tissue.organ must be one of {', '.join(ORGANS)}, or null (decided by the tissue), "
+            f"got {cfg.tissue.organ!r}"
+        )
     if cfg.tissue.inlet_assignment not in INLET_ASSIGNMENTS:
         raise ConfigError(
             f"tissue.inlet_assignment must be one of {', '.join(INLET_ASSIGNMENTS)}, "
@@ -445,6 +476,14 @@ def validate(cfg: RunConfig) -> RunConfig:
                 "places them at their optimum: leave it unset (null) there"
             )
     _check_tissue_keys(cfg.tissue)
+    if cfg.tissue.ostium_height is not None and (cfg.tissue.inlets is not None or cfg.tissue.inlets_path):
+        given = "tissue.inlets" if cfg.tissue.inlets is not None else "tissue.inlets_path"
+        raise ConfigError(
+            f"tissue.ostium_height places the heart's own ostia, which {given} replaces: set one of them "
+            f"(got ostium_height={cfg.tissue.ostium_height:g} m)"
+        )
+    if cfg.tissue.inlets is not None and cfg.tissue.inlets_path:
+        raise ConfigError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
     _check_labels(cfg.tissue.labels)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):

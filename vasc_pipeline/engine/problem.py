@@ -20,7 +20,8 @@ from ..config.schema import ConfigError, RunConfig, packing_steps, scheduled_ste
 from ..model.costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, total_cost
 from ..model.physics import Physics, cost_tables, supply_radius
 from ..model.rng import seed_state
-from ..model.tissue import Tissue, TissueError, build_tissue
+from ..model.tissue import Tissue, build_tissue
+from ..model.tissue.grid import check_voxel_scale
 from ..model.tree import (
     Tree,
     TreeError,
@@ -146,14 +147,8 @@ def build_problem(config: Any) -> Problem:
             f"anneal.T_start={a.T_start:g} W must exceed the end temperature, {t_end:.4g} W "
             f"({where}, at n_terminals={n}); the schedule would warm up"
         )
+    check_voxel_scale(tissue, physics.supply_radius, n)
     rho = physics.supply_radius / tissue.voxel_size
-    if rho < 1.0:  # the supply term counts voxels within R_supply of a terminal: it needs several
-        raise TissueError(
-            f"tissue.voxel_size={tissue.voxel_size:.4g} m is coarser than the supply sphere (R_supply = "
-            f"{physics.supply_radius:.4g} m at n_terminals={n}; the grid is {tissue.shape[2]} x {tissue.shape[1]} x "
-            f"{tissue.shape[0]} voxels): the largest accepted voxel_size is R_supply. Set a smaller "
-            "tissue.voxel_size, or leave it unset (R_supply / 4)"
-        )
     sphere_voxels = math.pi * rho**2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho**3  # C_s scale of one move
 
     def tree_steps(phase: float) -> float:  # a share of the tree anneal's steps (after packing)

@@ -10,7 +10,9 @@
 Files (each only when the sweep has what it needs):
 
 - ``morphometry_vs_kassab.png``: element diameter and length against order (log y, SE
-  bars) with Kassab's RCA, LAD and LCX; left the largest N, right every N.
+  bars) with Kassab's RCA, LAD and LCX; left the largest N, right every N. For a tissue
+  that is no heart (``tissue.organ``) ``morphometry.png``, without Kassab's arteries (as the
+  other figures), and no ``agreement_vs_n.png``.
 - ``asymmetry.png``: D_s/D_p and D_l/D_p against parent order, every N, with the symmetric
   value 2^(-1/gamma).
 - ``mb_effect.png`` (several m_b): diameter, length and both ratios against order for
@@ -77,8 +79,9 @@ def make_figures(summary: xr.DataTree, output_dir) -> list[Path]:
 
     out = Path(output_dir) / FIGURES_DIR
     paths = []
+    heart = "kassab" in summary.children  # tissue.organ: Kassab's pig coronaries drawn for a heart only
     for func, name in (
-        (plot_morphometry, "morphometry_vs_kassab.png"),
+        (plot_morphometry, "morphometry_vs_kassab.png" if heart else "morphometry.png"),
         (plot_asymmetry, "asymmetry.png"),
         (plot_mb_effect, "mb_effect.png"),
         (plot_cost_traces, "cost_traces.png"),

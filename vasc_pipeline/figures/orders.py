@@ -1,8 +1,9 @@
 """Order-wise figures: morphometry against Kassab 1993, bifurcation asymmetry, and the effect of m_b.
 
-``morphometry_vs_kassab.png`` (:func:`plot_morphometry`), ``asymmetry.png``
-(:func:`plot_asymmetry`) and ``mb_effect.png`` (:func:`plot_mb_effect`), drawn from the
-summary's ``/morphometry``, ``/asymmetry`` and ``/kassab`` groups.
+``morphometry_vs_kassab.png`` (:func:`plot_morphometry`; ``morphometry.png`` for a tissue
+that is no heart), ``asymmetry.png`` (:func:`plot_asymmetry`) and ``mb_effect.png``
+(:func:`plot_mb_effect`), drawn from the summary's ``/morphometry``, ``/asymmetry`` and
+``/kassab`` groups (Kassab's arteries only where the summary has them: a heart's).
 """
 
 from __future__ import annotations
@@ -37,7 +38,20 @@ KASSAB_STYLE = {
 }
 
 
-def kassab_points(ax, kassab: xr.Dataset, what: str, scale: float, orders) -> None:
+def kassab_of(summary: xr.DataTree) -> xr.Dataset | None:
+    """The summary's ``/kassab`` group, or None for a tissue that is no heart (``tissue.organ``)."""
+    return summary["kassab"].to_dataset() if "kassab" in summary.children else None
+
+
+def against(kassab: xr.Dataset | None) -> str:
+    """The words a title adds when Kassab's arteries are drawn."""
+    return " against pig coronary arteries" if kassab is not None else ""
+
+
+def kassab_points(ax, kassab: xr.Dataset | None, what: str, scale: float, orders) -> None:
+    """Kassab's RCA, LAD and LCX element means ± SE; nothing for a tissue that is no heart (None)."""
+    if kassab is None:
+        return
     ref = kassab.sel(level="element")
     for artery, style in KASSAB_STYLE.items():
         r = ref.sel(artery=artery)
@@ -99,11 +113,11 @@ def every_n(summary: xr.DataTree) -> tuple[xr.Dataset, dict, list[int]]:
 
 @styled
 def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
-    """Element diameter and length against order with Kassab's RCA/LAD/LCX; largest N and every N."""
+    """Element diameter and length against order with Kassab's RCA/LAD/LCX (a heart's); largest N and every N."""
     morph, point, ns = every_n(summary)
     if not ns:
         return None
-    kassab = summary["kassab"].to_dataset()
+    kassab = kassab_of(summary)
     orders = morph.order.values
     orders = orders[orders >= 1]
     ncols = 2 if len(ns) > 1 else 1
@@ -130,7 +144,7 @@ def plot_morphometry(summary: xr.DataTree, path) -> Path | None:
         axes[0, 1].set_title("every N")
     for a in axes[0]:
         a.legend(loc="upper left")
-    fig.suptitle(f"Best tree per cell against pig coronary arteries ({point_text(point)}); mean ± SE", fontsize=9)
+    fig.suptitle(f"Best tree per cell{against(kassab)} ({point_text(point)}); mean ± SE", fontsize=9)
     fig.tight_layout()
     return save(fig, path)
 
@@ -180,7 +194,7 @@ def plot_mb_effect(summary: xr.DataTree, path) -> Path | None:
     if "m_b" not in morph.dims or morph.sizes["m_b"] < 2:
         return None
     asym = summary["asymmetry"].to_dataset()
-    kassab = summary["kassab"].to_dataset()
+    kassab = kassab_of(summary)
     dims = cell_dims(summary)
     base = reference_point(morph, dims, exclude=("m_b", "n_terminals"))
     n = int(morph.n_terminals.values.max())

@@ -4,7 +4,8 @@
 row) against order, one column per N, each with Kassab's RCA, LAD and LCX.
 ``agreement_vs_n.png`` (:func:`plot_agreement`): one number per N and artery, the mean over
 orders of |log10 model/Kassab| (the summary's ``/comparison``), for diameter and length.
-Both are drawn only when the sweep has trees at two or more N.
+Both are drawn only when the sweep has trees at two or more N; the second, and Kassab's
+arteries in the first, only for a heart (``tissue.organ``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from .orders import KASSAB_STYLE, WHAT, every_n, kassab_points, model_points
+from .orders import KASSAB_STYLE, WHAT, against, every_n, kassab_of, kassab_points, model_points
 from .style import order_axis, palette, point_text, save, styled, subplots
 
 __all__ = ["plot_size_scan", "plot_agreement"]
@@ -21,11 +22,11 @@ __all__ = ["plot_size_scan", "plot_agreement"]
 
 @styled
 def plot_size_scan(summary: xr.DataTree, path) -> Path | None:
-    """Element diameter and length against order, one column per N, with Kassab's three arteries."""
+    """Element diameter and length against order, one column per N, with Kassab's three arteries (a heart's)."""
     morph, point, ns = every_n(summary)
     if len(ns) < 2:
         return None
-    kassab = summary["kassab"].to_dataset()
+    kassab = kassab_of(summary)
     orders = morph.order.values
     orders = orders[orders >= 1]
     colors = palette(len(ns))
@@ -45,7 +46,7 @@ def plot_size_scan(summary: xr.DataTree, path) -> Path | None:
         axes[1, col].set_xlabel("order")
     fig.supxlabel("diameter-defined Strahler order (the model's trunk = 11)", fontsize=9)
     axes[0, 0].legend(loc="upper left", fontsize=6.5)
-    fig.suptitle(f"Best tree per N against pig coronary arteries ({point_text(point)}); mean ± SE", fontsize=9)
+    fig.suptitle(f"Best tree per N{against(kassab)} ({point_text(point)}); mean ± SE", fontsize=9)
     fig.tight_layout()
     return save(fig, path)
 
@@ -54,7 +55,7 @@ def plot_size_scan(summary: xr.DataTree, path) -> Path | None:
 def plot_agreement(summary: xr.DataTree, path) -> Path | None:
     """Mean |log10 model/Kassab| over orders against N, per artery; diameter and length panels."""
     _, point, ns = every_n(summary)
-    if len(ns) < 2:
+    if len(ns) < 2 or "comparison" not in summary.children:  # no heart: nothing was compared
         return None
     comparison = summary["comparison"].to_dataset().sel(point).sel(n_terminals=ns)
     fig, axes = subplots(1, 2, figsize=(7.4, 3.2), sharey=True)

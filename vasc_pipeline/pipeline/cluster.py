@@ -261,7 +261,11 @@ _WORKER_ENV = [
 
 
 def _dashboard_options(cluster: ClusterConfig) -> dict:
-    """Scheduler options: the dashboard at cluster.dashboard_address, or off (its HTTP server on loopback)."""
+    """Scheduler options: the dashboard at cluster.dashboard_address, or off (its HTTP server on loopback).
+
+    Off, the HTTP server (health checks, metrics) takes any free port: given no address, Dask
+    would ask for its dashboard's 8787 and, that port taken, announce a "dashboard" elsewhere.
+    """
     if cluster.dashboard_address and has_bokeh():
         return {"dashboard": True, "dashboard_address": cluster.dashboard_address}
     return {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
@@ -402,12 +406,14 @@ def _client(cluster: ClusterConfig, n_jobs: int, output_dir: str | os.PathLike |
             cl.adapt(minimum_jobs=jobs, maximum_jobs=jobs)
         else:
             n = cluster.n_workers or max(1, min(_cores(), n_jobs))
+            dashboard = _dashboard_options(cluster)
             cl = LocalCluster(
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
-                dashboard_address=cluster.dashboard_address if has_bokeh() else None,
+                dashboard_address=dashboard["dashboard_address"],
+                scheduler_kwargs={"dashboard": dashboard["dashboard"]},  # LocalCluster's own: address given
                 silence_logs=logging.ERROR,
             )
         try:

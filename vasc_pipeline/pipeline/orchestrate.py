@@ -25,6 +25,7 @@ and, optionally, a Dask client of their own). The path of a sweep:
 from __future__ import annotations
 
 import contextlib
+import logging
 import signal
 import sys
 import time
@@ -128,8 +129,29 @@ def compile_kernels(jobs: list[Job] | None = None, stream: TextIO | None = None)
         stream.flush()
 
 
+@contextlib.contextmanager
+def _tissue_reports_muted():
+    """Drop the tissue builders' INFO reports (the heart's achieved mass) for a while: the
+    warm-up builds the sweep's tissues again, which the plan has reported already."""
+    from ..model.tissue import heart
+
+    def drop(record: logging.LogRecord) -> bool:
+        return record.levelno > logging.INFO
+
+    heart.log.addFilter(drop)
+    try:
+        yield
+    finally:
+        heart.log.removeFilter(drop)
+
+
 def _warm_up(jobs: list[Job]) -> None:
     """A few steps of each distinct kind of job (see :func:`compile_kernels`)."""
+    with _tissue_reports_muted():
+        _warm_up_jobs(jobs)
+
+
+def _warm_up_jobs(jobs: list[Job]) -> None:
     from .. import engine
 
     seen = set()

@@ -1,11 +1,11 @@
-"""Export trees to VTK PolyData (``.vtp``, opens in ParaView) and CSV.
+"""Export trees to VTK PolyData (``.vtp``, opens in ParaView) and CSV (and, for a run store, svZeroDSolver's 0D JSON).
 
 Pure functions on a run store's tree arrays (``parent``, ``position`` [m],
 ``radius`` [m], ``kind``), plus :func:`export_run` for a finished run store::
 
     from vasc_pipeline.reduce.export import export_run
     export_run("results/smoke/runs/sphere-N16-mb641.3-s0.zarr", "trees/")
-    # -> trees/sphere-N16-mb641.3-s0.vtp, trees/sphere-N16-mb641.3-s0.csv
+    # -> trees/sphere-N16-mb641.3-s0.vtp, .csv and .0d.json (svZeroDSolver, vasc_pipeline.reduce.zerod)
 
 The VTP file is VTK XML PolyData written directly (ASCII, full float precision): every
 node is a point, every segment a two-point line from the parent node to the node. No VTK
@@ -193,8 +193,10 @@ def export_tree(
     return write_vtp(vtp, table), write_csv(csv, table)
 
 
-def export_run(store_path, out_dir, name: str | None = None) -> tuple[Path, Path]:
-    """Export the final tree of a complete run store to ``.vtp`` and ``.csv``.
+def export_run(store_path, out_dir, name: str | None = None, *, zero_d: bool = True) -> tuple[Path, ...]:
+    """Export the final tree of a complete run store: ``.vtp``, ``.csv`` and ``.0d.json``.
+
+    What the reduction writes for the best tree of every cell, in one call.
 
     Parameters
     ----------
@@ -204,11 +206,14 @@ def export_run(store_path, out_dir, name: str | None = None) -> tuple[Path, Path
         Created if needed.
     name : str, optional
         File stem; default the run id.
+    zero_d : bool, default True
+        Also write the svZeroDSolver network ``<name>.0d.json``
+        (:func:`vasc_pipeline.reduce.zerod.zero_d_model`).
 
     Returns
     -------
-    (Path, Path)
-        The ``.vtp`` and ``.csv`` paths.
+    tuple of Path
+        The ``.vtp``, ``.csv`` and (with ``zero_d``) ``.0d.json`` paths.
 
     Raises
     ------
@@ -224,12 +229,18 @@ def export_run(store_path, out_dir, name: str | None = None) -> tuple[Path, Path
         )
     tree = store.read_tree()
     total_flow = (store.attrs.get("physics") or {}).get("total_flow")
-    return export_tree(
+    name = name or store.run_id
+    paths = export_tree(
         out_dir,
-        name or store.run_id,
+        name,
         tree["parent"],
         tree["position"],
         tree["radius"],
         tree["kind"],
         total_flow=total_flow,
     )
+    if not zero_d:
+        return paths
+    from . import zerod
+
+    return (*paths, zerod.export_run(store_path, out_dir, name))

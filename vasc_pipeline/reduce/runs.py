@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from ..config.identity import mixed_configuration
+from ..config.schema import organ_of
 from ..model.costs import COST_TERMS
 from ..store.layout import cell_id, run_store_paths
 from ..store.run_store import STATUS_COMPLETE, SWEEP_AXES, StoreError, verify_store
@@ -46,6 +47,7 @@ class RunInfo:
     statistics: dict[str, float] = field(default_factory=dict)  # engine.tree_statistics
     config: dict[str, Any] = field(default_factory=dict, repr=False)  # the run's stored config
     method: str = "anneal"  # "anneal" or "cco" (stores written before CCO existed are anneal runs)
+    organ: str = "heart"  # tissue.organ as read (config.organ_of): only a heart's tree is compared with Kassab
 
     @property
     def cell_id(self) -> str:
@@ -117,6 +119,11 @@ def find_runs(
                 config=config,
                 statistics={k: as_float(v) for k, v in (attrs.get("statistics") or {}).items()},
                 method=str(coords.get("method") or (config.get("method") or {}).get("name") or "anneal"),
+                organ=organ_of(
+                    str(coords.get("tissue", config.get("tissue", {}).get("name"))),
+                    (config.get("tissue") or {}).get("organ"),
+                    int((attrs.get("physics") or {}).get("n_inlets", 2)),  # not recorded: compared, as before
+                ),
             )
         )
     return sorted(runs, key=lambda r: r.run_id), skipped

@@ -10,9 +10,11 @@ Cells are the grid points without the seed: (tissue, n_terminals, m_b, steps). I
 cell the complete run with the lowest final annealed cost (``attrs["cost"]["total"]``)
 is the cell's tree (:mod:`vasc_pipeline.reduce.runs`); its morphometry
 (:func:`vasc_pipeline.reduce.morphometry.morphometry`, orders shifted so that the highest is 11) is
-compared with Kassab et al. 1993. The summary's schema is :mod:`vasc_pipeline.reduce.summary`'s;
-this module writes it, derives the tables (``comparison.csv``, ``comparison_summary.csv``,
-``anatomy.csv`` and the printed table) from it, and calls the exports and figures.
+compared with Kassab et al. 1993 when the tissue is a heart (``tissue.organ``; the comparison's
+table, CSVs, summary groups and figure panels are left out otherwise). The summary's schema is
+:mod:`vasc_pipeline.reduce.summary`'s; this module writes it, derives the tables (``comparison.csv``,
+``comparison_summary.csv``, ``anatomy.csv`` and the printed tables) from it, and calls the exports and
+figures.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ __all__ = [
     "comparison_frame",
     "anatomy_frame",
     "format_comparison",
+    "format_anatomy",
     "reduce",
     "SUMMARY_NAME",
     "COMPARISON_CSV",
@@ -76,9 +79,9 @@ class Reduction:
     summary_path: Path
     best: dict[tuple, RunInfo]
     cell_dims: list[str]
-    comparison: pd.DataFrame
-    comparison_csv: Path
-    comparison_summary_csv: Path
+    comparison: pd.DataFrame | None  # None (and no CSVs) for a tissue that is no heart (tissue.organ)
+    comparison_csv: Path | None
+    comparison_summary_csv: Path | None
     anatomy_csv: Path
     trees: list[Path] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
@@ -218,19 +221,33 @@ def format_comparison(summary: xr.DataTree) -> str:
         mal = " ".join(f"{a} {float(c.mean_abs_log10_ratio_length.sel(artery=a)):.3f}" for a in ARTERIES)
         n = int(c.n_orders_compared.isel(artery=0))
         lines.append(f"mean |log10 model/Kassab| over {n} orders: D {mad} | L {mal}")
-        lines.append(_format_anatomy(summary["anatomy"].to_dataset().sel(point), int(morph["best_seed"].sel(point))))
     return "\n".join(lines)
 
 
-def _format_anatomy(anatomy: xr.Dataset, seed: int) -> str:
-    """One line of the best tree's anatomy (:mod:`vasc_pipeline.reduce.anatomy`) for the console table."""
-    a = anatomy.sel(seed=seed)
+def format_anatomy(summary: xr.DataTree) -> str:
+    """Human-readable anatomy of every cell's best tree (:mod:`vasc_pipeline.reduce.anatomy`), a line each."""
+    anatomy = summary["anatomy"].to_dataset()
+    morph = summary["morphometry"].to_dataset()
+    dims = list(summary.attrs["cell_dims"])
+    lines = ["Anatomy of every cell's best tree (pressures from the inlet's, by Poiseuille):"]
+    stacked = morph["best_run_id"].stack(cell=dims)
+    for i in range(stacked.sizes["cell"]):
+        point = {d: stacked["cell"].values[i][j] for j, d in enumerate(dims)}
+        run_id = str(stacked.values[i])
+        if run_id:
+            seed = int(morph["best_seed"].sel(point))
+            lines.append(f"{run_id}: {_anatomy_line(anatomy.sel(point).sel(seed=seed))}")
+    return "\n".join(lines)
+
+
+def _anatomy_line(a: xr.Dataset) -> str:
+    """One tree's anatomy in one line."""
     pairs = zip(a.inlet.values, a.inlet_share.values)
     shares = " ".join(f"{str(i)} {float(v):.0%}" for i, v in pairs if np.isfinite(v))
     off = float(a.bifurcations_off_organ_share)
     hk = HUO_KASSAB_EXPONENTS
     return (
-        f"anatomy: terminals {shares} | bifurcations > 2 mm off the organ "
+        f"terminals {shares} | bifurcations > 2 mm off the organ "
         + (f"{off:.1%}" if np.isfinite(off) else "-")
         + f" | terminal pressure min {float(a.terminal_pressure_min) / MMHG:.0f}, median "
         f"{float(a.terminal_pressure_median) / MMHG:.0f} mmHg, mean drop {float(a.pressure_drop_mean) / MMHG:.0f} mmHg "
@@ -318,14 +335,24 @@ def reduce(
     check_one_configuration(out, runs)
     summary, best, dims = build_summary(runs, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
-    frame = comparison_frame(summary)
-    csv = _write_csv(frame, out / COMPARISON_CSV)
-    csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+    frame = csv = csv_summary = None
+    if "comparison" in summary.children:
+        frame = comparison_frame(summary)
+        csv = _write_csv(frame, out / COMPARISON_CSV)
+        csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+        stream.write(format_comparison(summary) + "\n")
+    else:
+        for stale in (out / COMPARISON_CSV, out / COMPARISON_SUMMARY_CSV):  # an earlier reduction's, not of these runs
+            stale.unlink(missing_ok=True)
+        stream.write(
+            "No comparison with Kassab et al. 1993 (pig coronary arteries): tissue.organ is other (set so, or a "
+            "mask with one inlet); tissue.organ=heart compares the trees with them.\n"
+        )
     csv_anatomy = _write_csv(anatomy_frame(summary), out / ANATOMY_CSV)
+    stream.write(format_anatomy(summary) + "\n")
     result = Reduction(
         out, summary, summary_path, best, dims, frame, csv, csv_summary, csv_anatomy, skipped=skipped, damaged=damaged
     )
-    stream.write(format_comparison(summary) + "\n")
     result.removed = remove_superseded_outputs(out, best)
     if exports:
         from . import zerod
@@ -333,9 +360,8 @@ def reduce(
 
         try:
             for r in best.values():
-                result.trees.extend(export_run(r.path, out / TREES_DIR))
-                network = zerod.export_run(r.path, out / TREES_DIR)  # the svZeroDSolver network
-                result.trees.append(network)
+                vtp, table, network = export_run(r.path, out / TREES_DIR)
+                result.trees.extend((vtp, table, network))
                 deviation = zerod.solver_check(json.loads(network.read_text()), r.physics["pressure_inlet"])
                 if deviation is not None:
                     result.zero_d_check[r.run_id] = deviation
@@ -351,8 +377,10 @@ def reduce(
     lines = [
         f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
         f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
-        f"  comparison: {csv}, {csv_summary}; anatomy: {csv_anatomy}",
     ]
+    if csv is not None:
+        lines.append(f"  comparison: {csv}, {csv_summary}")
+    lines.append(f"  anatomy: {csv_anatomy}")
     if result.trees:
         lines.append(
             f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv, .0d.json for svZeroDSolver)"

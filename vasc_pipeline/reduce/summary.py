@@ -28,6 +28,9 @@ anneal and CCO runs (otherwise each is a scalar coordinate). Groups:
 - ``/comparison``   (cell..., artery, order) and (cell..., artery): model against Kassab,
   element level, diameter-defined orders; mean absolute log10 ratios.
 
+``/kassab`` and ``/comparison`` exist for a heart only (``tissue.organ``, decided by
+:func:`vasc_pipeline.config.organ_of` when unset); the root attribute ``organ`` says which.
+
 Orders of cells with different N are aligned on the shifted order (highest = 11): a
 smaller tree simply has NaN / 0 at the low orders it does not reach.
 """
@@ -64,7 +67,6 @@ _COST_META = {
     "exclusion": _TRACE_META["exclusion"],
     "pressure": _TRACE_META["pressure"],
 }
-_CELL_GROUPS = ("/morphometry", "/asymmetry", "/costs", "/anatomy", "/traces", "/comparison")
 _CELL_META = {
     "tissue": {"long_name": "tissue"},
     "method": {"long_name": "how the tree was grown (anneal, cco)"},
@@ -226,9 +228,11 @@ def build_summary(
     best = best_runs(runs, dims)
     cell_coords = {d: sorted({getattr(r, d) for r in runs}) for d in dims}
     morph = {key: _morphometry_of(r) for key, r in best.items()}
+    # Kassab's pig coronary arteries are the yardstick of a heart's trees only (tissue.organ)
+    heart = all(r.organ == "heart" for r in runs)
     # One order axis for all cells: the union of the shifted orders (highest 11) and Kassab's 1..11.
-    reference = kassab_dataset()
-    lo = min([int(ds.order.min()) for ds in morph.values()] + [int(reference.order.min())])
+    reference = kassab_dataset() if heart else None
+    lo = min([int(ds.order.min()) for ds in morph.values()] + ([int(reference.order.min())] if heart else []))
     orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
 
     morph_parts, asym_parts, comp_parts = {}, {}, {}
@@ -251,8 +255,8 @@ def build_summary(
         ds.attrs = {}
         asym_parts[key] = ds[list(_ASYMMETRY_VARS)]
         morph_parts[key] = ds.drop_vars(list(_ASYMMETRY_VARS))
-        comp, _ = _comparison_part(ds, reference, orders)
-        comp_parts[key] = comp
+        if heart:
+            comp_parts[key], _ = _comparison_part(ds, reference, orders)
     n_seeds = {k: sum(1 for r in runs if r.cell(dims) == k) for k in best}
     trunks = {r.path: _main_trunks_of(r) for r in runs}  # read once: the spread and the tortuosity use them
     extra = {
@@ -305,20 +309,9 @@ def build_summary(
     )
     asymmetry = _stack(asym_parts, dims, cell_coords)
     asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
-    comparison = _stack(comp_parts, dims, cell_coords)
-    comparison = comparison.assign_coords(
-        artery=("artery", np.array(ARTERIES, dtype=object), {"long_name": "coronary artery (Kassab 1993)"})
-    )
-    comparison["order"].attrs.update(long_name=f"vessel order (shifted: highest = {_m.TOP_ORDER})", units="1")
-    comparison.attrs.update(
-        title="Model (lowest-cost tree per cell) against Kassab et al. 1993",
-        scheme=COMPARISON_SCHEME,
-        level=COMPARISON_LEVEL,
-    )
     costs = _costs(runs, best, dims, cell_coords)
     anatomy = _anatomy(runs, dims, cell_coords)
     traces = _traces(runs, dims, cell_coords)
-    kassab = _strings_as_objects(reference)
 
     tissues = sorted({r.tissue for r in runs})
     root = xr.Dataset(
@@ -333,6 +326,7 @@ def build_summary(
             "tissues": tissues,
             "comparison_scheme": COMPARISON_SCHEME,
             "comparison_level": COMPARISON_LEVEL,
+            "organ": "heart" if heart else "other",
         }
     )
     groups = {
@@ -342,19 +336,36 @@ def build_summary(
         "/costs": costs,
         "/anatomy": anatomy,
         "/traces": traces,
-        "/kassab": kassab,
-        "/comparison": comparison,
     }
+    if heart:
+        groups["/kassab"] = _strings_as_objects(reference)
+        groups["/comparison"] = _comparison_group(comp_parts, dims, cell_coords)
+    cell_groups = [name for name in groups if name not in ("/", "/kassab")]
     if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
-        for name in _CELL_GROUPS:
+        for name in cell_groups:
             groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
     if "method" not in dims:  # one method: likewise
         method = runs[0].method
-        for name in _CELL_GROUPS:
+        for name in cell_groups:
             groups[name] = groups[name].assign_coords(method=((), method, _CELL_META["method"]))
     for ds in groups.values():
         _strings_as_objects(ds, inplace=True)
     return xr.DataTree.from_dict(groups), best, dims
+
+
+def _comparison_group(comp_parts: dict, dims: list[str], cell_coords: dict) -> xr.Dataset:
+    """The ``/comparison`` group from the cells' :func:`_comparison_part` datasets."""
+    comparison = _stack(comp_parts, dims, cell_coords)
+    comparison = comparison.assign_coords(
+        artery=("artery", np.array(ARTERIES, dtype=object), {"long_name": "coronary artery (Kassab 1993)"})
+    )
+    comparison["order"].attrs.update(long_name=f"vessel order (shifted: highest = {_m.TOP_ORDER})", units="1")
+    comparison.attrs.update(
+        title="Model (lowest-cost tree per cell) against Kassab et al. 1993",
+        scheme=COMPARISON_SCHEME,
+        level=COMPARISON_LEVEL,
+    )
+    return comparison
 
 
 def _strings_as_objects(ds: xr.Dataset, inplace: bool = False) -> xr.Dataset:

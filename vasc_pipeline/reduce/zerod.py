@@ -17,8 +17,9 @@ Units are SI throughout (Pa, m³ s⁻¹, Pa s m⁻³, m): svZeroDSolver takes an
     model = zerod.zero_d_model(tree, physics)        # a dict in svZeroDSolver's input format
     import svzerod; svzerod.simulate(model)          # pandas DataFrame: flow_in/out, pressure_in/out per vessel
 
-:func:`export_run` writes ``<out_dir>/<run_id>.0d.json`` for a complete run store; the
-reduction writes one beside every exported tree, and ``python -m vasc_pipeline.reduce.zerod STORE
+:func:`export_run` writes ``<out_dir>/<run_id>.0d.json`` for a complete run store;
+:func:`vasc_pipeline.reduce.export.export_run` writes it beside the tree's ``.vtp`` and ``.csv``
+(the reduction's export of every cell's best tree), and ``python -m vasc_pipeline.reduce.zerod STORE
 [OUT_DIR]`` does it for one run store.
 """
 

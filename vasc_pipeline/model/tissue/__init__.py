@@ -22,7 +22,7 @@ from .grid import (
     resampled_exclusion_grid,
     voxelize,
 )
-from .shapes import box, mask, plane2d, sphere
+from .shapes import box, given_inlets, mask, plane2d, sphere
 
 __all__ = [
     "Tissue",
@@ -44,10 +44,24 @@ TISSUES: dict[str, Callable[..., Tissue]] = {
 }
 # The tissues drawn from shapes: on another grid they are voxelised anew (the user's mask is resampled).
 SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box")
+# The tissues with no inlets of their own: their builder takes tissue.inlets or tissue.inlets_path.
+OWN_INLETS_REQUIRED = ("mask",)
 
 
-def build_tissue(name: str, n_terminals: int, exclusion_voxel_size: float | None = None, **params) -> Tissue:
+def build_tissue(
+    name: str,
+    n_terminals: int,
+    exclusion_voxel_size: float | None = None,
+    inlets=None,
+    inlets_path: str | None = None,
+    **params,
+) -> Tissue:
     """Build the named tissue for ``n_terminals`` terminals (params: the tissue config).
+
+    ``inlets`` ([x, y, z] positions [m], ``tissue.inlets``) or ``inlets_path`` (a JSON or CSV
+    file, ``tissue.inlets_path``) replace a tissue's own inlets (the heart's ostia, the
+    sphere's pole, ...) on its own grid, checked as its own are (inside the grid's box, not
+    inside a cavity); ``tissue=mask``, which has none of its own, needs one of them.
 
     ``exclusion_voxel_size`` [m] (``tissue.exclusion_voxel_size``) gives the exclusion term a
     grid of its own (:attr:`Tissue.exclusion_grid`): a shaped tissue voxelised at that edge, over
@@ -56,11 +70,19 @@ def build_tissue(name: str, n_terminals: int, exclusion_voxel_size: float | None
     """
     if name not in TISSUES:
         raise TissueError(f"tissue.name: unknown tissue {name!r}; accepted: {', '.join(sorted(TISSUES))}")
-    tissue = TISSUES[name](n_terminals, **params)
+    build = TISSUES[name]
+    if name in OWN_INLETS_REQUIRED:
+        tissue = build(n_terminals, inlets=inlets, inlets_path=inlets_path, **params)
+    else:
+        tissue = build(n_terminals, **params)
+        given = given_inlets(inlets, inlets_path)
+        if given is not None:
+            tissue.place_inlets(*given)
     if exclusion_voxel_size is not None and exclusion_voxel_size != tissue.voxel_size:
         try:
             if name in SHAPED_TISSUES:
-                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size})
+                # only its exclusion grid is used: the tissue it voxelises is not reported again
+                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size}, report=False)
                 tissue.exclusion_grid = twin.exclusion_grid
             else:
                 tissue.exclusion_grid = resampled_exclusion_grid(tissue, exclusion_voxel_size)

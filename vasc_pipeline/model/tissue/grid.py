@@ -36,12 +36,21 @@ __all__ = [
     "voxelize",
     "default_voxel_size",
     "check_grid_memory",
+    "check_voxel_scale",
     "VOXELS_PER_SUPPLY_RADIUS",
+    "MASK_VOXEL_RANGE",
+    "MASK_EXTENT_RANGE",
 ]
 
 # Voxel edge = R_supply / VOXELS_PER_SUPPLY_RADIUS when a tissue does not fix it:
 # ~270 voxels per supply sphere at every N.
 VOXELS_PER_SUPPLY_RADIUS = 4.0
+# The scale of a user's grid (tissue=mask): images of organs, micro-CT to clinical CT and MRI, have voxel
+# edges of 1 um to 10 mm, and organs span 0.1 mm (a zebrafish heart) to 2 m (a whole human body). Outside
+# these a voxel size is almost surely in another unit (millimetres given as metres, a header's unit wrong),
+# which would run to the end and show only in the morphometry.
+MASK_VOXEL_RANGE = (1e-6, 1e-2)  # m
+MASK_EXTENT_RANGE = (1e-4, 2.0)  # m, the tissue's largest extent along x, y or z
 # Peak bytes per voxel while a grid is built: three float64 coordinate grids, the boolean and
 # uint8 masks, the distance transform (float64 distances and int32 feature indices per axis)
 # and its float32 copy. An estimate that refuses a grid before it is allocated.
@@ -72,6 +81,51 @@ def check_grid_memory(counts, voxel_size: float) -> None:
 
 class TissueError(ValueError):
     """A tissue configuration that cannot be built; the message names the field."""
+
+
+def check_voxel_scale(tissue: Tissue, supply_radius: float | None = None, n_terminals: int | None = None) -> None:
+    """Refuse (TissueError) a voxel size the model cannot use: on a user's grid
+    (:attr:`Tissue.voxel_size_from` set: ``tissue=mask``) voxels or a tissue at a scale no organ
+    has (:data:`MASK_VOXEL_RANGE`, :data:`MASK_EXTENT_RANGE`), and, given the supply radius
+    [m], one coarser than the supply sphere (the supply term counts the voxels within R_supply
+    of a terminal: it needs several).
+
+    A :class:`Tissue` checks the first itself, before its inlets (which a grid in the wrong unit
+    misplaces); :func:`vasc_pipeline.engine.build_problem` checks both once R_supply is known.
+    """
+    h = float(tissue.voxel_size)
+    given = tissue.voxel_size_from
+    if given is not None:
+        unit = (
+            "tissue.voxel_size is in metres (1 mm is 0.001)"
+            if given.startswith("tissue.voxel_size")
+            else "is the header's unit right? (NIfTI's xyzt_units, NRRD's space units; unset means mm)"
+        )
+        lo, hi = MASK_VOXEL_RANGE
+        if not lo <= h <= hi:
+            raise TissueError(
+                f"{given} gives voxels of {h * 1e3:.4g} mm, outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the voxel "
+                f"edges of images of organs (micro-CT to clinical CT and MRI): {unit}"
+            )
+        voxels = 0
+        for axis in range(3):  # the tissue's extent along each axis, from its projections (no copy per voxel)
+            occupied = np.flatnonzero(tissue.mask.any(axis=tuple(a for a in range(3) if a != axis)))
+            voxels = max(voxels, int(occupied[-1] - occupied[0]) + 1)
+        extent = voxels * h
+        lo, hi = MASK_EXTENT_RANGE
+        if not lo <= extent <= hi:
+            raise TissueError(
+                f"{given} gives the tissue of {tissue.source!r} an extent of {extent * 1e3:.4g} mm ({voxels} voxels "
+                f"of {h * 1e3:.4g} mm), outside [{lo * 1e3:g}, {hi * 1e3:g}] mm, the sizes of organs (a zebrafish "
+                f"heart to a whole human body): {unit}"
+            )
+    if supply_radius is not None and supply_radius / h < 1.0:
+        what = f"tissue.voxel_size={h:.4g} m" if given is None else f"{given}: voxels of {h * 1e3:.4g} mm"
+        raise TissueError(
+            f"{what} is coarser than the supply sphere (R_supply = {supply_radius:.4g} m at n_terminals="
+            f"{n_terminals}; the grid is {tissue.shape[2]} x {tissue.shape[1]} x {tissue.shape[0]} voxels): the "
+            "largest accepted voxel_size is R_supply. Set a smaller tissue.voxel_size, or leave it unset (R_supply / 4)"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +224,14 @@ class Tissue:
     exclusion_grid : ExclusionGrid
         The grid the exclusion term is summed on: this grid's ``distance`` unless the builder
         (``tissue.exclusion_voxel_size``, :func:`vasc_pipeline.model.tissue.build_tissue`) set another.
+    inlets_from : str
+        Where the inlets came from (``tissue.inlets``, or ``tissue.inlets_path`` and its file),
+        the words an error about them starts with.
+    source : str, optional
+        The file a user's grid was read from (``tissue.path``); None for a shape built in code.
+    voxel_size_from : str, optional
+        Where a user's voxel size came from (``tissue.voxel_size``, a label map's header, a Zarr
+        attribute), the words :func:`check_voxel_scale` starts with; None for a shape built in code.
     """
 
     name: str
@@ -181,6 +243,9 @@ class Tissue:
     inlet_names: tuple[str, ...] = ()
     exclusion: np.ndarray | None = field(default=None, repr=False)
     open_boundary: np.ndarray | None = field(default=None, repr=False)
+    inlets_from: str = field(default="the tissue's own inlets", repr=False)
+    source: str | None = field(default=None, repr=False)
+    voxel_size_from: str | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
     exclusion_grid: ExclusionGrid = field(init=False, repr=False)
 
@@ -196,19 +261,8 @@ class Tissue:
             raise TissueError(f"tissue.voxel_size must be a positive length in metres, got {self.voxel_size}")
         if self.ndim == 2 and self.mask.shape[0] != 1:
             raise TissueError("a 2-D tissue has exactly one voxel layer")
-        if self.inlets.shape[1] != 3 or len(self.inlets) < 1:
-            raise TissueError(
-                f"tissue.inlets must be a list of [x, y, z] positions in metres, got {self.inlets.tolist()}"
-            )
-        if not self.inlet_names:
-            self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
-        lo, hi = self.bounds
-        for k, p in enumerate(self.inlets):
-            if np.any(p < lo) or np.any(p > hi):
-                raise TissueError(
-                    f"inlet {k} ({self.inlet_names[k]}) at {p.tolist()} m lies outside the voxel grid "
-                    f"[{lo.tolist()}, {hi.tolist()}] m; tissue.inlets must lie inside the grid"
-                )
+        if self.voxel_size_from is not None:
+            check_voxel_scale(self)
         if self.exclusion is None:
             self.exclusion = self.mask.copy()
         else:
@@ -224,10 +278,64 @@ class Tissue:
                 f"tissue '{self.name}': the open boundary has shape {self.open_boundary.shape}, "
                 f"the tissue mask {self.mask.shape}; they must be the same grid"
             )
+        self._check_inlets()
         # The builders pad the grid, but a user's mask may touch its edge: the distance map
         # pads it so the grid edge counts as outside (but where an open boundary continues).
         self.distance = exclusion_distance(self.exclusion, self.open_boundary, self.ndim)
         self.exclusion_grid = ExclusionGrid(self.distance, self.origin, float(self.voxel_size))
+
+    def place_inlets(self, inlets, names: tuple[str, ...] = (), source: str = "tissue.inlets") -> None:
+        """Replace the tissue's own inlets with ``inlets`` [m] (``tissue.inlets`` or
+        ``tissue.inlets_path``, named ``source`` in errors), checked as a builder's are; the grid
+        stays the tissue's."""
+        self.inlets = np.atleast_2d(np.asarray(inlets, dtype=np.float64))
+        self.inlet_names = tuple(names)
+        self.inlets_from = source
+        self._check_inlets()
+
+    def _check_inlets(self) -> None:
+        """Refuse (TissueError starting with :attr:`inlets_from`) inlets that are not [x, y, z]
+        positions inside the voxel grid's box, or that lie in a cavity (:attr:`cavity`).
+
+        An inlet may lie in the tissue or outside it (the heart's ostia lie above its base, by the
+        aortic root), but not in a voxel of the exclusion domain that is not tissue: its root
+        segment would have to cross the cavity large vessels must not cross."""
+        if self.inlets.ndim != 2 or self.inlets.shape[1] != 3 or len(self.inlets) < 1:
+            raise TissueError(
+                f"{self.inlets_from} must hold one or more [x, y, z] positions in metres, got {self.inlets.tolist()}"
+            )
+        if not self.inlet_names:
+            self.inlet_names = tuple(f"inlet{k}" for k in range(len(self.inlets)))
+        lo, hi = self.bounds
+        for k, p in enumerate(self.inlets):
+            if np.any(p < lo) or np.any(p > hi):
+                box = ", ".join(f"{axis} [{a * 1e3:.4g}, {b * 1e3:.4g}]" for axis, a, b in zip("xyz", lo, hi))
+                raise TissueError(
+                    f"{self.inlets_from}: inlet {k} ({self.inlet_names[k]}) at {_mm(p)} lies outside the voxel "
+                    f"grid's box, {box} mm"
+                    + (" (the plane of a 2-D tissue)" if self.ndim == 2 else "")
+                    + "; an inlet must lie inside it (positions in metres)"
+                )
+        for k in np.flatnonzero(self.contains(self.inlets, self.cavity)):
+            if self._opens_outward(self.voxel_index(self.inlets[k])):
+                continue  # at the cavity's opening, as the heart's ostia on its base plane may be
+            raise TissueError(
+                f"{self.inlets_from}: inlet {k} ({self.inlet_names[k]}) at {_mm(self.inlets[k])} lies inside a cavity "
+                "of the exclusion domain (voxels large vessels must not cross although they are no tissue: "
+                "tissue.labels.exclusion, tissue.exclusion_path, the heart's ventricles), which its root segment "
+                "could not leave without crossing; an inlet (ostium) lies in the tissue or in the space outside it"
+            )
+
+    def _opens_outward(self, zyx) -> bool:
+        """True when a face neighbour of voxel ``zyx`` lies outside the exclusion domain (the grid's
+        edge counting as outside): the voxel is on the surface between a cavity and the outside."""
+        for axis in range(1 if self.ndim == 2 else 0, 3):  # one layer: no neighbour across the plane
+            for step in (-1, 1):
+                n = np.array(zyx)
+                n[axis] += step
+                if np.any(n < 0) or np.any(n >= np.array(self.shape)) or not self.exclusion[tuple(n)]:
+                    return True
+        return False
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -301,6 +409,11 @@ class Tissue:
                 moved[:, 2] = points[outside, 2]
             points[outside] = moved
         return points
+
+
+def _mm(point) -> str:
+    """A position [m] as an error message gives it: in millimetres, four significant digits."""
+    return "[" + ", ".join(f"{v * 1e3:.4g}" for v in np.asarray(point, dtype=np.float64)) + "] mm"
 
 
 def voxelize(

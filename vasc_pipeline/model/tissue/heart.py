@@ -414,6 +414,8 @@ def heart_tissue(
     ostium_height: float | None = None,
     base_cut: float | None = None,
     elongation: float | None = None,
+    *,
+    report: bool = True,
     **_,
 ) -> Tissue:
     """The coronary substrate (LV + RV myocardium) with the LCA and RCA ostia as inlets.
@@ -428,7 +430,9 @@ def heart_tissue(
     the aortic root's wall (default: the reference heart's 5 mm, scaled: 5.8 mm at 218 g).
     ``base_cut`` (in [0, 0.7]; default 1/3) and ``elongation`` (in [0.5, 2]; default 1)
     reshape the reference heart before it is scaled to ``mass_g`` (module docstring).
-    Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass.
+    Keys meant for other tissues are ignored. Logs the achieved (voxelised) mass at INFO, or
+    with ``report=False`` (the exclusion grid's twin, :func:`vasc_pipeline.model.tissue.build_tissue`)
+    at DEBUG.
     """
     voxel_size, mass_g, density, ostium_height, shape = _validate(
         n_terminals, voxel_size, mass_g, density, ostium_height, base_cut, elongation
@@ -437,7 +441,8 @@ def heart_tissue(
         n_terminals, voxel_size, mass_g, density, bool(exclude_cavities), q_required, total_flow, ostium_height, shape
     )
     achieved = tissue.measure * density * 1e3
-    log.info(
+    log.log(
+        logging.INFO if report else logging.DEBUG,
         "heart tissue: %.2f g myocardium as voxelised (target %.2f g, %+.2f%%), %d voxels of %.3g mm, "
         "grid %s, LV long axis %.1f mm",
         achieved,

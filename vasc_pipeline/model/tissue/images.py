@@ -9,7 +9,7 @@ with flipped or permuted axes are reoriented to that frame; an oblique (rotated)
 anisotropic voxels are refused with the spacing in the message (resample it first, e.g. with
 SimpleITK or 3D Slicer). :func:`write_label_map` writes a NIfTI label map the other way.
 
-    python -m vasc_pipeline.model.tissue.images heart.nii.gz [N_TERMINALS]
+    python -m vasc_pipeline.model.tissue heart.nii.gz [N_TERMINALS]
 
 writes the shipped heart as a label map (1 myocardium, 2 cavities, 3 the open space above the
 base that the exclusion map looks through) and its ostia as ``heart.inlets.json``; feed it back
@@ -29,6 +29,7 @@ from .grid import Tissue, TissueError
 
 __all__ = [
     "LABEL_MAP_SUFFIXES",
+    "MASK_FORMATS",
     "HEART_LABELS",
     "is_label_map",
     "read_label_map",
@@ -39,6 +40,11 @@ __all__ = [
 ]
 
 LABEL_MAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr")
+# What tissue.path (and tissue.exclusion_path) reads, for the messages that refuse anything else.
+MASK_FORMATS = (
+    "a NumPy .npy file, a Zarr array or group (a directory), or a NIfTI (.nii, .nii.gz) or NRRD (.nrrd, .nhdr) "
+    "label map"
+)
 # The label values write_heart uses: myocardium (supply), cavities (excluded), open base.
 HEART_LABELS = {"supply": 1, "exclusion": 2, "open": 3}
 _ISOTROPY = 1e-4  # relative spread of the voxel edges accepted as isotropic
@@ -103,8 +109,9 @@ _UNITS = {"mm": 1e-3, "m": 1.0, "meter": 1.0, "micron": 1e-6, "um": 1e-6}
 
 def _open(path, field: str, with_data: bool):
     """(data (i, j, k) or None, shape, voxel-to-world affine in metres) of a label map."""
+    is_nrrd = str(path).lower().endswith((".nrrd", ".nhdr"))
     try:
-        if str(path).lower().endswith((".nrrd", ".nhdr")):
+        if is_nrrd:
             import nrrd
 
             data, header = nrrd.read(str(path)) if with_data else (None, nrrd.read_header(str(path)))
@@ -125,8 +132,13 @@ def _open(path, field: str, with_data: bool):
         ) from exc
     except TissueError:
         raise
-    except Exception as exc:  # a damaged or foreign file: say which and why
-        raise TissueError(f"tissue.{field}: cannot read the label map {str(path)!r}: {exc}") from exc
+    except Exception as exc:  # a damaged or foreign file: the reader's own words only as detail
+        kind, reader = ("NRRD", "pynrrd") if is_nrrd else ("NIfTI", "nibabel")
+        raise TissueError(
+            f"tissue.{field}: {str(path)!r} is not a readable {kind} label map: the file is damaged, truncated or "
+            f"not {kind} ({reader}: {type(exc).__name__}: {exc}); write it again from the segmentation, or give "
+            f"another of the formats read: {MASK_FORMATS}"
+        ) from exc
     if str(unit).lower() not in _UNITS:
         raise TissueError(f"tissue.{field}: the label map {str(path)!r} is in {unit!r}; accepted: mm, m, um")
     affine = np.array(affine, dtype=float)
@@ -215,15 +227,8 @@ def write_heart(path, n_terminals: int = 200) -> tuple[Path, Path]:
     return path, inlets
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if not 1 <= len(args) <= 2 or args[0] in ("-h", "--help") or not is_label_map(args[0]):
-        print("usage: python -m vasc_pipeline.model.tissue.images OUT.nii.gz [N_TERMINALS]", file=sys.stderr)
-        return 2
-    image, inlets = write_heart(args[0], int(args[1]) if len(args) > 1 else 200)
-    print(f"{image}\n{inlets}")
-    return 0
+if __name__ == "__main__":  # the former command; runpy warns here, the package's own entry does not
+    import runpy
 
-
-if __name__ == "__main__":
-    sys.exit(main())
+    print("vasc_pipeline: the command is now python -m vasc_pipeline.model.tissue", file=sys.stderr)
+    runpy.run_module("vasc_pipeline.model.tissue", run_name="__main__", alter_sys=True)

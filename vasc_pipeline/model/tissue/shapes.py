@@ -15,7 +15,7 @@ import numpy as np
 from . import images
 from .grid import Tissue, TissueError, default_voxel_size, voxelize
 
-__all__ = ["sphere", "box", "plane2d", "mask", "mask_geometry"]
+__all__ = ["sphere", "box", "plane2d", "mask", "mask_geometry", "given_inlets"]
 
 
 def sphere(
@@ -71,6 +71,19 @@ def plane2d(n_terminals: int, side: float = 0.1, voxel_size: float | None = None
     return Tissue("plane2d", mask, h, origin, [[0.0, 0.0, 0.0]], ndim=2, inlet_names=("root",))
 
 
+def given_inlets(inlets=None, inlets_path: str | None = None) -> tuple | None:
+    """(positions [m], names, the words naming them in errors) of the inlets a config gives,
+    ``tissue.inlets`` or ``tissue.inlets_path`` (read here); None when it gives none."""
+    if inlets_path:
+        if inlets is not None:
+            raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
+        points, names = images.read_inlets(inlets_path)
+        return points, names, f"tissue.inlets_path ({inlets_path!r})"
+    if inlets is None:
+        return None
+    return inlets, (), "tissue.inlets"
+
+
 def mask_geometry(path: str | None, array: str | None = None, voxel_size=None, origin=None, stored=None) -> tuple:
     """(``tissue.voxel_size``, ``tissue.origin``) as a mask run takes them: the config's where set,
     else a label map's header or a Zarr array's attrs (``stored``, when already read); the origin
@@ -103,6 +116,13 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
     if images.is_label_map(p):  # NIfTI or NRRD: spacing and origin from the header
         data, h, origin = images.read_label_map(p, field)
         return data, {"voxel_size": h, "origin": origin.tolist()}
+    if p.is_file() and p.suffix != ".npy":  # Zarr would call it "No group found in store"
+        raise TissueError(f"tissue.{field}: {str(p)!r} is not a mask this reads; accepted: {images.MASK_FORMATS}")
+    if p.is_dir() and not any((p / name).is_file() for name in ("zarr.json", ".zarray", ".zgroup")):
+        raise TissueError(
+            f"tissue.{field}: {str(p)!r} is a directory but not a Zarr store (no zarr.json, .zarray or .zgroup in "
+            f"it); accepted: {images.MASK_FORMATS}"
+        )
     attrs: dict = {}
     try:
         if p.suffix == ".npy":
@@ -193,18 +213,21 @@ def mask(
     h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
     if h is None or not float(h) > 0:
         raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
+    if images.is_label_map(path):  # a config's voxel_size is the header's (a run records the value taken)
+        voxel_size_from = f"the header of tissue.path ({path!r})"
+    elif voxel_size is not None:
+        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
+    else:
+        voxel_size_from = f"the voxel_size attribute of tissue.path ({path!r})"
     org = np.asarray(org, dtype=np.float64)
     if org.shape != (3,):
         raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
-    names: tuple[str, ...] = ()
-    if inlets_path:
-        if inlets is not None:
-            raise TissueError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
-        inlets, names = images.read_inlets(inlets_path)
-    if inlets is None:
+    given = given_inlets(inlets, inlets_path)
+    if given is None:
         raise TissueError(
             "tissue.inlets (a list of [x, y, z] positions in metres) or tissue.inlets_path is required for tissue=mask"
         )
+    inlets, names, inlets_from = given
     by_label = {k: v for k, v in (labels or {}).items() if v is not None}
     grid = (np.asarray(data) != 0).astype(np.uint8)
     extra = open_boundary = None
@@ -213,12 +236,20 @@ def mask(
             raise TissueError(
                 "tissue.labels.exclusion and tissue.exclusion_path both give the exclusion domain: set one"
             )
+        present = set(np.unique(data).tolist())
+        for role, values in by_label.items():  # a label in no voxel is a mistake in every role
+            missing = [v for v in values if v not in present]
+            if missing:
+                raise TissueError(
+                    f"tissue.labels.{role}: no voxel of {path!r} holds the labels {missing} (its labels: "
+                    f"{sorted(present)[:20]}{', ...' if len(present) > 20 else ''})"
+                )
         named = np.isin(data, [v for k in ("exclusion", "open") for v in by_label.get(k, [])])
         grid = (np.isin(data, by_label["supply"]) if "supply" in by_label else (data != 0) & ~named).astype(np.uint8)
         if not grid.any():
             raise TissueError(
-                f"tissue.labels.supply: no voxel of {path!r} holds the labels {by_label.get('supply', 'nonzero')} "
-                f"(its labels: {np.unique(data).tolist()[:20]})"
+                f"tissue.labels.supply: no voxel of {path!r} is left for the tissue: every nonzero label is named "
+                f"exclusion or open (its labels: {sorted(present)[:20]})"
             )
         if "exclusion" in by_label:
             extra = np.isin(data, by_label["exclusion"]).astype(np.uint8)
@@ -238,5 +269,16 @@ def mask(
     if ndim == 2 and open_boundary is not None:
         open_boundary = open_boundary[None]
     return Tissue(
-        "mask", grid, float(h), org, inlets, ndim=ndim, inlet_names=names, exclusion=extra, open_boundary=open_boundary
+        "mask",
+        grid,
+        float(h),
+        org,
+        inlets,
+        ndim=ndim,
+        inlet_names=names,
+        exclusion=extra,
+        open_boundary=open_boundary,
+        inlets_from=inlets_from,
+        source=str(path),
+        voxel_size_from=voxel_size_from,
     )
