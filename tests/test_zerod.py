@@ -15,6 +15,7 @@ from helpers import ENV, REPO
 from vasc_pipeline.physics import Physics, cost_tables
 
 from vasc_pipeline import config, costs, engine, job, sweep
+from vasc_pipeline.model.tree import tree_from_arrays
 from vasc_pipeline.reduce import zerod
 
 svzerod = pytest.importorskip("svzerod", reason="svzerod (pip install -e '.[test]') runs the exported networks")
@@ -26,7 +27,7 @@ def test_a_hand_built_tree_gives_the_network_by_hand():
     # inlet 0 -> bifurcation 3 -> terminals 1 and 2
     parent = np.array([-1, 3, 3, 0])
     position = np.array([[0.0, 0, 0], [0.01, 0.01, 0], [0.01, -0.01, 0], [0.01, 0, 0]])
-    tree = zerod.tree_from_arrays(parent, position)
+    tree = tree_from_arrays(parent, position)
     physics = Physics(
         n_terminals=2, n_inlets=1, gamma=3.0, inlet_radius=1e-3, total_flow=2e-6, m_b=641.3, viscosity=3.6e-3,
         supply_radius=1e-3,

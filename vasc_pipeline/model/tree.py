@@ -24,6 +24,7 @@ __all__ = [
     "node_kinds",
     "random_tree",
     "inlet_counts",
+    "tree_from_arrays",
     "inlet_count_bounds",
     "nearest_inlets",
     "count_terminals",
@@ -96,6 +97,17 @@ def count_terminals(parent: np.ndarray, n_terminals: int, n_inlets: int) -> np.n
         return terminals_downstream(parent, node_kinds(n_terminals, n_inlets))
     except ValueError as exc:  # a cycle, or an index out of range
         raise TreeError(str(exc)) from exc
+
+
+def tree_from_arrays(parent: np.ndarray, position: np.ndarray, n_inlets: int | None = None) -> Tree:
+    """A :class:`~vasc_pipeline.tree.Tree` from a run store's ``parent`` and ``position`` arrays
+    (inlets first, then the N terminals, then the bifurcations)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    k = int(np.count_nonzero(parent < 0)) if n_inlets is None else int(n_inlets)
+    n = parent.size // 2  # K inlets + N terminals + (N - K) bifurcations
+    return Tree(
+        parent, children_from_parent(parent), np.asarray(position, dtype=np.float64), count_terminals(parent, n, k), k
+    )
 
 
 def random_terminal_sites(tissue: Tissue, n_terminals: int, state: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from ..model.topology import (
     terminals_downstream,
     topological_order,
 )
-from .zerod import tree_from_arrays
+from ..model.tree import tree_from_arrays
 
 __all__ = [
     "ANATOMY_FIELDS",

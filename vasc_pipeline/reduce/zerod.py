@@ -34,24 +34,13 @@ import numpy as np
 
 from ..model.costs import node_pressures, segment_lengths
 from ..model.physics import Physics, cost_tables
-from ..model.tree import Tree, children_from_parent, count_terminals
+from ..model.tree import Tree, tree_from_arrays
 
-__all__ = ["zero_d_model", "tree_from_arrays", "write_zero_d", "zero_d_path", "export_run", "solver_check"]
+__all__ = ["zero_d_model", "write_zero_d", "zero_d_path", "export_run", "solver_check"]
 
 # A steady model: conditions constant over one "cycle" of two time points (the solver needs a
 # time axis; with no capacitance or inductance every point is the same algebraic solution).
 _STEADY = {"number_of_cardiac_cycles": 1, "number_of_time_pts_per_cardiac_cycle": 2}
-
-
-def tree_from_arrays(parent: np.ndarray, position: np.ndarray, n_inlets: int | None = None) -> Tree:
-    """A :class:`~vasc_pipeline.tree.Tree` from a run store's ``parent`` and ``position`` arrays
-    (inlets first, then the N terminals, then the bifurcations)."""
-    parent = np.asarray(parent, dtype=np.int64)
-    k = int(np.count_nonzero(parent < 0)) if n_inlets is None else int(n_inlets)
-    n = parent.size // 2  # K inlets + N terminals + (N - K) bifurcations
-    return Tree(
-        parent, children_from_parent(parent), np.asarray(position, dtype=np.float64), count_terminals(parent, n, k), k
-    )
 
 
 def zero_d_model(tree: Tree, physics: Physics, inlet_names: tuple[str, ...] | None = None) -> dict:
