@@ -39,6 +39,11 @@ the final tree with :func:`vasc_pipeline.model.costs.full_costs`, so the stored 
 with the anneal's. Randomness comes from the run's xoshiro state (``rng``): a run is a pure
 function of (config, seed).
 
+One growth serves every caller: :func:`grow_arrays` grows from given inlets over a
+:class:`SiteDomain` (any set of voxels) with given cost tables, and :func:`grow_tree` is it on a
+run's problem; the whole tree below an annealed one (:mod:`vasc_pipeline.engine.extend`) grows
+each territory with it, rooted at the annealed terminal.
+
 Usable without Hydra or Dask::
 
     from vasc_pipeline import cco, config, costs, engine
@@ -60,12 +65,22 @@ from ..kernel.state import _add
 from ..model.costs import full_costs, total_cost
 from ..model.physics import cost_tables
 from ..model.rng import next_below, next_double, seed_state
-from ..model.tree import Tree, random_terminal_sites
+from ..model.tree import Tree, sites_in_voxels
 from ..store.run_store import TRACE_FIELDS
 from .fermat import _norm3, fermat_point
 
 # fermat_point lives in vasc_pipeline.engine.fermat; it stays importable from here, where it is used.
-__all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", "TRACE_NAMES"]
+__all__ = [
+    "CCOResult",
+    "Grown",
+    "SiteDomain",
+    "grow",
+    "grow_arrays",
+    "grow_tree",
+    "fermat_point",
+    "connection_cost",
+    "TRACE_NAMES",
+]
 
 # Trace fields of a CCO run (the anneal's names; "step" counts terminals in the tree,
 # "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance criterion
@@ -300,16 +315,90 @@ def _site_order(problem, rng: np.ndarray) -> np.ndarray | None:
     return sites
 
 
-def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
-    """The CCO tree of ``problem``, drawing from ``rng`` (uint64 (4,), advanced in place).
+@dataclass(frozen=True)
+class SiteDomain:
+    """Where random terminal sites are drawn: a set of voxels of an isotropic grid.
 
-    Returns (tree, trace (N, 3): C_v, C_w after each terminal and sites drawn for it,
-    sites drawn in all, final distance factor). The anneal's ``anneal.init=cco`` uses this.
+    Attributes
+    ----------
+    voxels : int64 (n_voxels,)
+        Flat (z, y, x) indices of the voxels, increasing.
+    shape : (nz, ny, nx)
+    origin : float64 (3,)
+        [x, y, z] of the centre of voxel [0, 0, 0] [m].
+    voxel_size : float
+        Edge of the voxels [m].
+    ndim : int
+        3, or 2 for one voxel layer (no offset in z).
     """
-    physics, tissue = problem.physics, problem.tissue
-    method = problem.config.method
-    n, k = physics.n_terminals, physics.n_inlets
-    tables = cost_tables(physics)
+
+    voxels: np.ndarray
+    shape: tuple
+    origin: np.ndarray
+    voxel_size: float
+    ndim: int
+
+    @classmethod
+    def of_tissue(cls, tissue) -> "SiteDomain":
+        """The tissue voxels of a :class:`~vasc_pipeline.model.tissue.Tissue`."""
+        voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
+        return cls(voxels, tuple(tissue.shape), tissue.origin, float(tissue.voxel_size), int(tissue.ndim))
+
+    @property
+    def measure(self) -> float:
+        """Volume [m^3] (area [m^2] when ``ndim`` is 2) of the voxels, as Tissue.measure counts it."""
+        return self.voxels.size * self.voxel_size**self.ndim
+
+    def draw(self, n: int, rng: np.ndarray) -> np.ndarray:
+        """``n`` uniform points in the voxels (:func:`~vasc_pipeline.model.tree.sites_in_voxels`)."""
+        return sites_in_voxels(self.voxels, self.shape, self.origin, self.voxel_size, self.ndim, n, rng)
+
+
+@dataclass
+class Grown:
+    """The arrays of a CCO growth (:func:`grow_arrays`), in the layout of :class:`~vasc_pipeline.model.tree.Tree`."""
+
+    parent: np.ndarray  # int64 (2N,)
+    children: np.ndarray  # int64 (2N, 2)
+    position: np.ndarray  # float64 (2N, 3), m
+    n_down: np.ndarray  # int64 (2N,)
+    trace: np.ndarray  # float64 (N, 3): C_v, C_w after each terminal, sites drawn for it
+    costs: np.ndarray  # float64 (2,): C_v, C_w of the grown tree [W], the running sums
+    drawn: int
+    factor: float
+
+
+def grow_arrays(
+    inlets: np.ndarray,
+    n_terminals: int,
+    tables,
+    domain: SiteDomain,
+    method,
+    rng: np.ndarray,
+    sites: np.ndarray | None = None,
+) -> Grown:
+    """Grow N terminals from fixed inlets: the CCO growth on plain arrays, without a Problem.
+
+    Parameters
+    ----------
+    inlets : float64 (K, 3)
+        Inlet positions [m].
+    n_terminals : int
+        N.
+    tables : CostTables
+        :func:`~vasc_pipeline.model.physics.cost_tables` of the physics whose radius law the
+        weights w(n) follow (rows up to n = N at least).
+    domain : SiteDomain
+        Where random sites are drawn (and whose measure sets the distance criterion).
+    method
+        ``candidates``, ``max_tries`` and ``shrink`` (a :class:`~vasc_pipeline.config.MethodConfig`).
+    rng : uint64 (4,)
+        The generator, advanced in place.
+    sites : float64 (N, 3), optional
+        Given sites in the order they are added (then ``domain`` draws nothing).
+    """
+    inlets = np.atleast_2d(np.asarray(inlets, dtype=np.float64))
+    n, k = int(n_terminals), len(inlets)
     w_vol = np.ascontiguousarray(tables.volume)
     w_pow = np.ascontiguousarray(tables.power)
     m = 2 * n
@@ -318,13 +407,12 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
     position = np.zeros((m, 3))
     n_down = np.zeros(m, dtype=np.int64)
     seg_length = np.zeros(m)
-    position[:k] = tissue.inlets
-    sites = _site_order(problem, rng)
-    first = random_terminal_sites(tissue, k, rng) if sites is None else sites[:k]
+    position[:k] = inlets
+    first = domain.draw(k, rng) if sites is None else sites[:k]
     # The first K terminals go straight to the inlets, by the cheapest assignment.
     best = min(
         itertools.permutations(range(k)),
-        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - tissue.inlets[j]) for j in range(k)),
+        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - inlets[j]) for j in range(k)),
     )
     costs, compensation = np.zeros(2), np.zeros(2)
     trace = np.zeros((n, 3))
@@ -338,7 +426,6 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         _add(costs, compensation, 0, float(w_vol[1]) * seg_length[t])
         _add(costs, compensation, 1, float(w_pow[1]) * seg_length[t])
         trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
-    voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
     # one argument per flat array, as _grow's signature lists them (numba takes no struct)
     drawn, factor = _grow(
         parent,
@@ -353,13 +440,13 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         w_pow,
         sites if sites is not None else np.zeros((0, 3)),
         sites is None,
-        voxels,
-        np.array(tissue.shape, dtype=np.int64),
-        np.ascontiguousarray(tissue.origin, dtype=np.float64),
-        float(tissue.voxel_size),
-        tissue.ndim == 2,
-        float(tissue.measure),
-        int(tissue.ndim),
+        domain.voxels,
+        np.array(domain.shape, dtype=np.int64),
+        np.ascontiguousarray(domain.origin, dtype=np.float64),
+        float(domain.voxel_size),
+        domain.ndim == 2,
+        float(domain.measure),
+        int(domain.ndim),
         int(method.candidates),
         int(method.max_tries),
         float(method.shrink),
@@ -367,8 +454,28 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         trace,
         k,
     )
-    tree = Tree(parent, children, position, n_down, k)
-    return tree, trace, int(drawn) + k, float(factor)
+    return Grown(parent, children, position, n_down, trace, costs + compensation, int(drawn) + k, float(factor))
+
+
+def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
+    """The CCO tree of ``problem``, drawing from ``rng`` (uint64 (4,), advanced in place).
+
+    Returns (tree, trace (N, 3): C_v, C_w after each terminal and sites drawn for it,
+    sites drawn in all, final distance factor). The anneal's ``anneal.init=cco`` uses this.
+    """
+    physics, tissue = problem.physics, problem.tissue
+    sites = _site_order(problem, rng)
+    grown = grow_arrays(
+        tissue.inlets,
+        physics.n_terminals,
+        cost_tables(physics),
+        SiteDomain.of_tissue(tissue),
+        problem.config.method,
+        rng,
+        sites,
+    )
+    tree = Tree(grown.parent, grown.children, grown.position, grown.n_down, physics.n_inlets)
+    return tree, grown.trace, grown.drawn, grown.factor
 
 
 def grow(problem, seed: int | None = None, rng: np.ndarray | None = None) -> CCOResult:
