@@ -97,6 +97,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.parts": 1,
     "anneal.part_phases": 64,
     "anneal.part_share": 0.9,
+    "method.avoid_cavities": False,
 }
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
 ANNEAL_INITS = ("random", "cco")  # the anneal's initial tree
@@ -245,6 +246,7 @@ class MethodConfig(Settings):
     max_tries: int = 10  # cco: rejected sites before the distance criterion shrinks
     shrink: float = 0.9  # cco: factor of that shrink
     order: str = "file"  # cco with terminals.path: "file" order or a seeded "random" order
+    avoid_cavities: bool = False  # cco: no new segment crosses a cavity voxel (tissue.cavity); the extension's rule
 
 
 @dataclass
@@ -636,3 +638,5 @@ def _validate_method(cfg: RunConfig) -> None:
         raise ConfigError(f"method.shrink must lie in (0, 1), got {m.shrink}")
     if m.order not in ("file", "random"):
         raise ConfigError(f"method.order must be 'file' or 'random', got {m.order!r}")
+    if not isinstance(m.avoid_cavities, bool):
+        raise ConfigError(f"method.avoid_cavities must be true or false, got {m.avoid_cavities!r}")
