@@ -324,6 +324,8 @@ def extend_output_dir(cfg: Any, client: Any = None, stream: TextIO | None = None
     result: dict[str, Any] = {"runs": [], "failed": {}, "skipped": skipped}
     with contextlib.ExitStack() as stack:
         if client is None:
+            import distributed  # noqa: F401  (its import sets its log levels: before open_client quiets them)
+
             client = stack.enter_context(open_client(cfg.cluster, n_batches, out))
         wait_for_workers(client, cfg.cluster, n_batches)
         mapper = dask_mapper(client, cfg.cluster.retries)

@@ -28,13 +28,13 @@ import json
 import os
 import time
 import warnings
+import zlib
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
 import numpy as np
 import zarr
 
-from .checkpoints import crc32
 from .run_store import STATUS_COMPLETE, STATUS_RUNNING, StoreError, _jsonable, file_lock
 
 __all__ = ["ExtendedStore", "EXTENDED_FORMAT", "TREE_CHUNK", "extended_lock", "identity_hash"]
@@ -235,6 +235,15 @@ class ExtendedStore:
         n = self.nodes_committed
         return {name: self.group[f"tree/{name}"][:n] for name in TREE_NAMES}
 
+    def _crc32(self, name: str) -> int:
+        """CRC-32 of ``tree/<name>``'s committed bytes (checkpoints.crc32 of the whole array), read a
+        chunk at a time: a million-node tree is never in memory at once."""
+        arr, value = self.group[f"tree/{name}"], 0
+        for lo in range(0, self.nodes_committed, TREE_CHUNK):
+            data = np.ascontiguousarray(arr[lo : min(lo + TREE_CHUNK, self.nodes_committed)])
+            value = zlib.crc32(data.view(np.uint8).reshape(-1).data, value)
+        return value
+
     def finish(self, **attrs: Any) -> None:
         """Mark the store complete (with ``attrs``: cost, statistics, timings, ...) in one attribute
         write, with CRC-32 checksums of the tree, then consolidate its metadata."""
@@ -243,7 +252,7 @@ class ExtendedStore:
                 f"extended store {str(self.path)!r} holds {self.nodes_committed} of its "
                 f"{self.group.attrs['n_nodes']} nodes: not complete"
             )
-        checksums = {f"tree/{name}": crc32(data) for name, data in self.read_tree().items()}
+        checksums = {f"tree/{name}": self._crc32(name) for name in TREE_NAMES}
         self._set_attrs(status=STATUS_COMPLETE, checksums=checksums, **attrs)
         with warnings.catch_warnings():  # "consolidated metadata is not part of the v3 spec"
             warnings.simplefilter("ignore")
@@ -255,6 +264,6 @@ class ExtendedStore:
         attrs = self.attrs
         if attrs.get("status") != STATUS_COMPLETE:
             raise StoreError(f"extended store {str(self.path)!r} is not complete")
-        for name, data in self.read_tree().items():
-            if crc32(data) != (attrs.get("checksums") or {}).get(f"tree/{name}"):
+        for name in TREE_NAMES:
+            if self._crc32(name) != (attrs.get("checksums") or {}).get(f"tree/{name}"):
                 raise StoreError(f"extended store {str(self.path)!r}: array tree/{name} fails its CRC-32 check")
