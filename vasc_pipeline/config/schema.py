@@ -262,7 +262,7 @@ class ExtendConfig(Settings):
 
     n_terminals: int = 1_000_000  # fine terminals in all, rounded to a multiple of the run's N
     runs: str = "best"  # "best": the lowest-cost seed of each cell; "all": every complete run
-    batch_territories: int = 100  # territories per task (the result does not depend on it)
+    batch_territories: int = 200  # territories per task (the result does not depend on it)
     seed: Optional[int] = None  # None: the run's own seed
 
 

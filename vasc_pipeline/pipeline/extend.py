@@ -113,7 +113,7 @@ def extend_run(
     *,
     seed: int | None = None,
     method=None,
-    batch_territories: int = 100,
+    batch_territories: int = 200,
     mapper: Callable = map,
     stream: TextIO | None = None,
     progress_interval: float | None = None,
