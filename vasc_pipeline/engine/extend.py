@@ -220,8 +220,9 @@ def per_territory(n_fine: int, n_annealed: int) -> int:
     m = int(math.floor(n_fine / n_annealed + 0.5))
     if m < 1:
         raise ExtendError(
-            f"extend.n_terminals={n_fine} is below the run's {n_annealed} annealed terminals: every annealed "
-            f"terminal needs at least one fine terminal below it; accepted: extend.n_terminals >= {n_annealed}"
+            f"extend.n_terminals={n_fine} is too few for the run's {n_annealed} annealed terminals: every one "
+            f"needs at least one fine terminal below it, and the count is rounded to the nearest multiple of "
+            f"N = {n_annealed}; accepted: extend.n_terminals >= {(n_annealed + 1) // 2}"
         )
     return m
 
