@@ -336,3 +336,52 @@ def test_extend_stage_on_a_local_cluster_best_seed_then_all_runs(heart, tmp_path
     stream = io.StringIO()
     assert orchestrate.main(config.compose(["+stage=extend", f"output_dir={tmp_path / 'none'}"]), stream) == 2
     assert "no runs/" in stream.getvalue()
+
+
+@pytest.mark.integration
+def test_sigterm_ends_the_extension_with_a_message_and_the_rerun_resumes(heart, tmp_path):
+    import shutil
+
+    from helpers import cli, finish
+
+    out = tmp_path / "out"  # a copy of the runs: the other tests' extended stores are not this one's
+    shutil.copytree(Path(heart[0].store).parent, out / "runs")
+    args = [
+        "+stage=extend",
+        f"output_dir={out}",
+        "extend.n_terminals=7200",  # 300 per territory: a few seconds, one territory per batch
+        "extend.batch_territories=1",
+        "extend.seed=11",
+        "cluster.n_workers=1",
+        "cluster.dashboard_address=null",
+    ]
+    proc = cli(*args)
+    path = out / "extended"
+    try:
+        deadline = time.monotonic() + 240
+        done = 0
+        while done < 1 and time.monotonic() < deadline and proc.poll() is None:
+            for store_json in path.glob("*.zarr/zarr.json"):
+                try:
+                    done = max(done, json.loads(store_json.read_text())["attributes"].get("territories_done", 0))
+                except (OSError, ValueError):
+                    pass
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        code, output = finish(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == 143, output
+    assert "interrupted (Ctrl-C or SIGTERM)" in output and "Traceback" not in output, output
+    (store_path,) = path.glob("*.zarr")
+    assert ExtendedStore.open(store_path).status == "running"
+    code, output = finish(cli(*args))
+    assert code == 0, output
+    resumed = ExtendedStore.open(store_path)
+    assert resumed.status == "complete" and len(resumed.attrs["sessions"]) == 2
+    source = next(j for j in heart if j.run_id == resumed.attrs["run_id"])
+    reference = extended(source, tmp_path / "ref.zarr", 7200, seed=11)
+    for name, data in resumed.read_tree().items():
+        np.testing.assert_array_equal(data, reference[name], err_msg=name)

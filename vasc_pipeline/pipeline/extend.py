@@ -49,17 +49,21 @@ class ExtendProgress:
         self.started = time.monotonic()
         self.last = 0.0
         self.printed = -1  # territories done at the last line
+        self.paced = False  # the clock restarted at the first batch
 
     def line(self) -> str:
         elapsed = max(time.monotonic() - self.started, 1e-9)
-        rate = (self.done - self.start_done) / elapsed
-        eta = (self.total - self.done) / rate if rate > 0 else math.inf
+        rate = (self.done - self.start_done) / elapsed if self.done > self.start_done else 0.0
+        eta = 0.0 if self.done >= self.total else (self.total - self.done) / rate if rate > 0 else math.inf
+        pace = f"{rate * self.per_territory:.3g}" if rate > 0 else "-"
         return (
-            f"extend {self.name}: territories {self.done}/{self.total} | "
-            f"{rate * self.per_territory:.3g} fine terminals/s | ETA {_duration(eta)}"
+            f"extend {self.name}: territories {self.done}/{self.total} | {pace} fine terminals/s | ETA {_duration(eta)}"
         )
 
     def update(self, done: int, force: bool = False) -> None:
+        if not self.paced and done > self.done:
+            # the pace from the first batch on: the start (compiling, workers loading the kernels) is not it
+            self.started, self.start_done, self.paced = time.monotonic(), done, True
         self.done = done
         now = time.monotonic()
         if (force and done != self.printed) or now - self.last >= self.interval:
@@ -306,10 +310,11 @@ def extend_output_dir(cfg: Any, client: Any = None, stream: TextIO | None = None
     import contextlib
 
     from ..reduce.runs import best_runs, find_runs
-    from .cluster import open_client, wait_for_workers
+    from .cluster import check_cluster, open_client, probe_scheduler, wait_for_workers
 
     stream = stream or sys.stderr
     out = Path(cfg.output_dir)
+    check_cluster(cfg.cluster)
     runs, skipped = find_runs(out)
     if not runs:
         raise ExtendError(
@@ -322,6 +327,8 @@ def extend_output_dir(cfg: Any, client: Any = None, stream: TextIO | None = None
     size = cfg.extend.batch_territories
     n_batches = sum(-(-r.n_terminals // size) for r in chosen)
     result: dict[str, Any] = {"runs": [], "failed": {}, "skipped": skipped}
+    if client is None and cfg.cluster.address:
+        probe_scheduler(cfg.cluster)  # a wrong address is refused at once, never waited on
     with contextlib.ExitStack() as stack:
         if client is None:
             import distributed  # noqa: F401  (its import sets its log levels: before open_client quiets them)
@@ -376,12 +383,20 @@ def extend_stage(cfg: Any, stream: TextIO | None = None) -> int:
             "Give the output_dir of a sweep (output_dir=...).\n"
         )
         return 2
+    from .cluster import SweepStartError
+
     try:
         result = extend_output_dir(cfg, stream=stream)
     except (ExtendError, ConfigError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2
+    except SweepStartError as exc:
+        stream.write(f"vasc_pipeline: error: {exc}\n")
+        return 1
     except KeyboardInterrupt:
-        stream.write("\nvasc_pipeline: interrupted. Committed batches are stored; the same command resumes.\n")
+        stream.write(
+            "\nvasc_pipeline: interrupted (Ctrl-C or SIGTERM). Committed batches are stored; the same command "
+            "resumes.\n"
+        )
         return 130
     return 1 if result["failed"] else 0

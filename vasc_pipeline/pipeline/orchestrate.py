@@ -583,11 +583,13 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
     stream = stream or sys.stderr
     if getattr(cfg, "stage", "run") == "reduce":
         return reduce_stage(cfg, stream)
+    terminated: list[int] = []
     if getattr(cfg, "stage", "run") == "extend":
         from .extend import extend_stage
 
-        return extend_stage(cfg, stream)
-    terminated: list[int] = []
+        with _terminate_as_interrupt(terminated):
+            status = extend_stage(cfg, stream)
+        return 128 + signal.SIGTERM if terminated and status == 130 else status
     try:
         with _terminate_as_interrupt(terminated):
             result = run_sweep(cfg, stream=stream)
