@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from .._jit import jit
-from ..model.physics import Physics, cost_tables, segment_factors
+from ..model.physics import CostTables, Physics, cost_tables, segment_factors
 from ..model.rng import seed_state
 from ..model.topology import KIND_TERMINAL, segment_lengths, terminals_downstream
 from .cco import SiteDomain, grow_arrays
@@ -262,7 +262,7 @@ class Growth:
     voxel_size: float
     ndim: int
     territory_physics: Physics
-    tables: object
+    tables: CostTables
     candidates: int
     max_tries: int
     shrink: float
@@ -388,6 +388,11 @@ def plan_extension(
 
     method = method or MethodConfig()
     n_annealed = source.n_terminals
+    if source.terminals.size != n_annealed:
+        raise ExtendError(
+            f"run store {str(source.path)!r}: its tree holds {source.terminals.size} terminals (kind 2), its physics "
+            f"{n_annealed}: not a tree this version can extend"
+        )
     m = per_territory(n_fine, n_annealed)
     p = source.physics
     voxels = np.flatnonzero(source.mask.reshape(-1)).astype(np.int64)

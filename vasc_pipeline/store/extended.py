@@ -26,6 +26,7 @@ import contextlib
 import hashlib
 import json
 import os
+import shutil
 import time
 import warnings
 import zlib
@@ -97,8 +98,17 @@ class ExtendedStore:
         physics: Mapping[str, Any],
         territory_fields,
     ) -> "ExtendedStore":
-        """A new, empty store (refuses to overwrite): its identity, ``status="running"``, empty arrays."""
+        """A new, empty store (refuses to overwrite): its identity, ``status="running"``, empty arrays.
+
+        Built under a temporary name and renamed into place (one atomic step), so that a crash
+        while creating it never leaves a store without its arrays.
+        """
         path = Path(path)
+        if path.exists():
+            raise StoreError(f"extended store {str(path)!r} already exists")
+        for leftover in path.parent.glob(f"{path.name}.creating-*"):  # a crashed creation's
+            shutil.rmtree(leftover, ignore_errors=True)
+        final, path = path, path.with_name(f"{path.name}.creating-{os.getpid()}")
         attrs = {
             "format": EXTENDED_FORMAT,
             "run_id": run_id,
@@ -139,7 +149,8 @@ class ExtendedStore:
                 dimension_names=["territory"],
                 attributes={"long_name": long_name, "units": units},
             )
-        return cls(path, group)
+        os.rename(path, final)
+        return cls(final, zarr.open_group(str(final), mode="r+", zarr_format=3))
 
     @classmethod
     def open(cls, path: str | os.PathLike, mode: str = "r") -> "ExtendedStore":
