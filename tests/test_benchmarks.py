@@ -58,6 +58,10 @@ def test_benchmark_runs_in_quick_mode(script, tmp_path):
     if script.stem == "budget_law":  # synthetic rows with C_s/N a function of moves / N^1.5
         absolute = [r for r in records if r.get("fit") == "supply_per_terminal"]
         assert absolute and all(r["alpha"] == pytest.approx(1.5, abs=0.05) for r in absolute)
+    if script.stem == "extend_scaling":  # the N = 500 heart, 2 and 4 fine terminals per territory
+        rows = [r for r in records if "n_terminals" in r]
+        assert [(r["n_terminals"], r["per_territory"]) for r in rows] == [(1000, 2), (2000, 4)]
+        assert all(r["cavity_segments"] == 0 and r["peak_rss_mb"] > 0 for r in rows)
     if script.stem == "fidelity":
         (row,) = records
         assert row["n_terminals"] == 40 and row["n_orders"] == len(row["orders"]) >= 2

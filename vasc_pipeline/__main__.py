@@ -1,7 +1,8 @@
 """``python -m vasc_pipeline [overrides]``: one run, or a sweep with ``+sweep=NAME``.
 
 A finished sweep is reduced (summary.zarr, figures, trees); ``+stage=reduce
-output_dir=...`` only reduces the complete runs already there.
+output_dir=...`` only reduces the complete runs already there, and ``+stage=extend
+output_dir=...`` grows the whole tree below them (``extended/<run_id>.zarr``).
 
 Thin on purpose (everything it does is a plain function a test can call): Hydra composes the config, and
 :func:`vasc_pipeline.pipeline.orchestrate.main` (a plain function that tests call directly) does

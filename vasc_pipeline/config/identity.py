@@ -28,8 +28,9 @@ __all__ = [
 ]
 
 # Config sections that do not change a run's result: where it is written, how often it
-# checkpoints, and how the sweep/cluster around it is organised. Everything else does.
-_UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster")
+# checkpoints, how the sweep/cluster around it is organised, and what +stage=extend grows below
+# it (which stored configs never hold). Everything else does.
+_UNHASHED = ("output_dir", "checkpoint", "sweep", "cluster", "extend")
 # The sweep axes (flattened config keys): the only settings in which the runs of one output_dir
 # may differ; everything else in it is one configuration (a cell is never a mix of physics).
 SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")

@@ -20,7 +20,7 @@ from typing import Any, Optional
 from .errors import ConfigError
 from .frozen import Settings, _freeze, is_frozen, thawed
 from .pipeline import ClusterConfig, SlurmConfig, SweepConfig, TLSConfig
-from .rules import MAX_STEPS, SWEPT_KEYS, Rule, sweep_axis
+from .rules import MAX_STEPS, MAX_TERMINALS, SEED_ACCEPTED, SWEPT_KEYS, Rule, seed_ok, sweep_axis
 
 __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-exported: public API)
     "ConfigError",
@@ -32,6 +32,7 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "TerminalsConfig",
     "CheckpointConfig",
     "MethodConfig",
+    "ExtendConfig",
     "METHODS",
     "ModelConfig",
     "MODELS",
@@ -57,7 +58,9 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
 # An installed wheel carries conf/ inside the package; a source checkout has it at the top.
 _PACKAGE_DIR = Path(__file__).resolve().parents[1]  # vasc_pipeline/
 CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PACKAGE_DIR.parent / "conf"
-STAGES = ("run", "reduce")  # run: sweep then reduction; reduce: reduction of existing runs only
+STAGES = ("run", "reduce", "extend")  # run: sweep then reduction; reduce: reduction of existing runs only;
+# extend: the whole tree below existing runs (vasc_pipeline.pipeline.extend)
+EXTEND_RUNS = ("best", "all")  # extend.runs: the lowest-cost seed of each cell, or every complete run
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
 HEART_EXCLUSION_VOXEL_SIZE = 1.1533753893850243e-3  # m: R_supply / 4 of the heart at N = 500
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
@@ -104,6 +107,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.parts": 1,
     "anneal.part_phases": 64,
     "anneal.part_share": 0.9,
+    "method.avoid_cavities": False,
 }
 MODELS = ("paper", "physiological")  # conf/model/: which physics and tissue keys a model sets
 METHODS = ("anneal", "cco")  # how a tree is grown: simulated annealing, or constructive (vasc_pipeline.engine.cco)
@@ -276,6 +280,21 @@ class MethodConfig(Settings):
     max_tries: int = 10  # cco: rejected sites before the distance criterion shrinks
     shrink: float = 0.9  # cco: factor of that shrink
     order: str = "file"  # cco with terminals.path: "file" order or a seeded "random" order
+    avoid_cavities: bool = False  # cco: no new segment crosses a cavity voxel (tissue.cavity); the extension's rule
+
+
+@dataclass
+class ExtendConfig(Settings):
+    """``+stage=extend``: the whole tree below the complete runs of output_dir (vasc_pipeline.engine.extend).
+
+    Not part of any run's identity (the run stores never hold it); an extended store holds what
+    determines its own result.
+    """
+
+    n_terminals: int = 1_000_000  # fine terminals in all, rounded to a multiple of the run's N
+    runs: str = "best"  # "best": the lowest-cost seed of each cell; "all": every complete run
+    batch_territories: int = 200  # territories per task (the result does not depend on it)
+    seed: Optional[int] = None  # None: the run's own seed
 
 
 @dataclass
@@ -295,12 +314,14 @@ class RunConfig(Settings):
     terminals: TerminalsConfig = field(default_factory=TerminalsConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
     method: MethodConfig = field(default_factory=MethodConfig)
+    extend: ExtendConfig = field(default_factory=ExtendConfig)
     # The pipeline's groups (dataclasses in vasc_pipeline.config.pipeline): +sweep=NAME adds
     # a sweep, so it is optional; cluster is always present (cluster=local by default).
     sweep: Optional[SweepConfig] = None
     cluster: ClusterConfig = field(default_factory=lambda: ClusterConfig())
-    # What the command does: "run" the sweep (then reduce it), or only "reduce" the runs
-    # already in output_dir (+stage=reduce). Not part of a run's identity (sweep.py drops it).
+    # What the command does: "run" the sweep (then reduce it), only "reduce" the runs already in
+    # output_dir (+stage=reduce), or "extend" them (+stage=extend). Not part of a run's identity
+    # (sweep.py drops it).
     stage: str = "run"
 
 
@@ -602,6 +623,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         )
     if cfg.stage not in STAGES:
         raise ConfigError(f"stage must be one of {', '.join(STAGES)}, got {cfg.stage!r}")
+    _validate_extend(cfg.extend)
     _validate_method(cfg)
     if cfg.terminals.fixed and not cfg.terminals.path:
         raise ConfigError("terminals.fixed=true needs terminals.path (a CSV of x, y, z in metres)")
@@ -705,3 +727,21 @@ def _validate_method(cfg: RunConfig) -> None:
         raise ConfigError(f"method.shrink must lie in (0, 1), got {m.shrink}")
     if m.order not in ("file", "random"):
         raise ConfigError(f"method.order must be 'file' or 'random', got {m.order!r}")
+    if not isinstance(m.avoid_cavities, bool):
+        raise ConfigError(f"method.avoid_cavities must be true or false, got {m.avoid_cavities!r}")
+
+
+def _validate_extend(e: ExtendConfig) -> None:
+    n = e.n_terminals
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_TERMINALS:
+        raise ConfigError(
+            f"extend.n_terminals must be an integer in [1, {MAX_TERMINALS:.0e}] (fine terminals in all, at least "
+            f"the run's N), got {n!r}"
+        )
+    if e.runs not in EXTEND_RUNS:
+        raise ConfigError(f"extend.runs must be one of {', '.join(EXTEND_RUNS)}, got {e.runs!r}")
+    b = e.batch_territories
+    if isinstance(b, bool) or not isinstance(b, int) or not 1 <= b <= 10**7:
+        raise ConfigError(f"extend.batch_territories must be an integer in [1, 1e7], got {b!r}")
+    if e.seed is not None and not seed_ok(e.seed):
+        raise ConfigError(f"extend.seed must be {SEED_ACCEPTED} or null (the run's own seed), got {e.seed!r}")

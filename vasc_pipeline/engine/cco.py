@@ -34,10 +34,23 @@ the tree; f starts at 1 and is multiplied by ``method.shrink`` after every
 itself once and keeps shrinking with the tree). The first K terminals (K inlets) are
 joined straight to the inlets, matched to them by the cheapest assignment.
 
+Cavities (``method.avoid_cavities=true``): no new segment may cross a voxel of the tissue's
+cavities (its exclusion domain outside the tissue, :attr:`~vasc_pipeline.model.tissue.Tissue.cavity`;
+:func:`crosses`, a voxel walk). A connection that would is not made and the cheapest other
+candidate is; a site none of whose candidates can be joined is drawn again (not counted against
+the distance criterion), and random first sites are drawn again until their joins to the inlets
+are clear. Off by default (the earlier trees, bit for bit); the whole tree's territories
+(:mod:`vasc_pipeline.engine.extend`) always grow with it.
+
 Supply, exclusion and pressure are not seen by the growth; :func:`grow` evaluates them on
 the final tree with :func:`vasc_pipeline.model.costs.full_costs`, so the stored costs compare
 with the anneal's. Randomness comes from the run's xoshiro state (``rng``): a run is a pure
 function of (config, seed).
+
+One growth serves every caller: :func:`grow_arrays` grows from given inlets over a
+:class:`SiteDomain` (any set of voxels) with given cost tables, and :func:`grow_tree` is it on a
+run's problem; the whole tree below an annealed one (:mod:`vasc_pipeline.engine.extend`) grows
+each territory with it, rooted at the annealed terminal.
 
 Usable without Hydra or Dask::
 
@@ -50,6 +63,7 @@ Usable without Hydra or Dask::
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -60,12 +74,22 @@ from ..kernel.state import _add
 from ..model.costs import full_costs, total_cost
 from ..model.physics import cost_tables
 from ..model.rng import next_below, next_double, seed_state
-from ..model.tree import Tree, random_terminal_sites
+from ..model.tree import Tree, sites_in_voxels
 from ..store.run_store import TRACE_FIELDS
 from .fermat import _norm3, fermat_point
 
 # fermat_point lives in vasc_pipeline.engine.fermat; it stays importable from here, where it is used.
-__all__ = ["CCOResult", "grow", "grow_tree", "fermat_point", "connection_cost", "TRACE_NAMES"]
+__all__ = [
+    "CCOResult",
+    "Grown",
+    "SiteDomain",
+    "grow",
+    "grow_arrays",
+    "grow_tree",
+    "fermat_point",
+    "connection_cost",
+    "TRACE_NAMES",
+]
 
 # Trace fields of a CCO run (the anneal's names; "step" counts terminals in the tree,
 # "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance criterion
@@ -165,6 +189,90 @@ def _draw_site(rng, voxels, shape, origin, voxel_size, planar, out):
 
 
 @jit
+def crosses(forbidden, origin, voxel_size, a, b):
+    """Whether the segment a -> b [m] (float64 (3,)) passes through a voxel where ``forbidden``
+    (uint8 (z, y, x), origin and voxel_size of its grid) is nonzero; voxels beyond the grid are allowed.
+
+    A voxel walk (Amanatides & Woo) from a's voxel to b's, visiting every voxel the segment
+    touches (one touched only at an edge or corner too: a conservative test).
+    """
+    nz, ny, nx = forbidden.shape
+    u = np.empty(3)
+    d = np.empty(3)
+    cell = np.empty(3, dtype=np.int64)
+    last = np.empty(3, dtype=np.int64)
+    step = np.empty(3, dtype=np.int64)
+    t_next = np.empty(3)
+    t_delta = np.empty(3)
+    walk = 1
+    for k in range(3):
+        u[k] = (a[k] - origin[k]) / voxel_size
+        d[k] = (b[k] - origin[k]) / voxel_size - u[k]
+        cell[k] = np.int64(math.floor(u[k] + 0.5))
+        last[k] = np.int64(math.floor(u[k] + d[k] + 0.5))
+        walk += abs(last[k] - cell[k])
+        if d[k] > 0.0:
+            step[k] = 1
+            t_next[k] = (cell[k] + 0.5 - u[k]) / d[k]
+            t_delta[k] = 1.0 / d[k]
+        elif d[k] < 0.0:
+            step[k] = -1
+            t_next[k] = (cell[k] - 0.5 - u[k]) / d[k]
+            t_delta[k] = -1.0 / d[k]
+        else:
+            step[k] = 0
+            t_next[k] = math.inf
+            t_delta[k] = math.inf
+    for _ in range(walk):
+        x, y, z = cell[0], cell[1], cell[2]
+        if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz and forbidden[z, y, x] != 0:
+            return True
+        k = 0
+        if t_next[1] < t_next[k]:
+            k = 1
+        if t_next[2] < t_next[k]:
+            k = 2
+        if t_next[k] > 1.0:
+            break
+        cell[k] += step[k]
+        t_next[k] += t_delta[k]
+    return False
+
+
+@jit_inline
+def _joins_cross(forbidden, origin, voxel_size, bif, p, j, site):
+    """Whether any of the three new segments b-p, b-j, b-t of a connection crosses a forbidden voxel."""
+    return (
+        crosses(forbidden, origin, voxel_size, bif, p)
+        or crosses(forbidden, origin, voxel_size, bif, j)
+        or crosses(forbidden, origin, voxel_size, bif, site)
+    )
+
+
+@jit_inline
+def _cheapest_allowed(forbidden, origin, voxel_size, parent, position, cand, vol, pow_, bif, n_c, site, refused):
+    """The cheapest of the ``n_c`` evaluated candidates whose connection crosses no forbidden
+    voxel (ties: the nearer candidate, as without the test), or -1; ``refused`` is scratch."""
+    refused[:n_c] = False
+    for _ in range(n_c):
+        c_min = -1
+        for c in range(n_c):
+            if not refused[c] and (c_min < 0 or vol[c] + pow_[c] < vol[c_min] + pow_[c_min]):
+                c_min = c
+        j = cand[c_min]
+        if not _joins_cross(forbidden, origin, voxel_size, bif[c_min], position[parent[j]], position[j], site):
+            return c_min
+        refused[c_min] = True
+    return -1
+
+
+# Consecutive sites refused because each of their candidate connections crossed a forbidden voxel,
+# after which a terminal takes its cheapest connection regardless (a growth always ends; the
+# refused ones are counted in the trace's sites drawn)
+MAX_FORBIDDEN_REFUSALS = 10_000
+
+
+@jit
 def _grow(
     parent,
     children,
@@ -191,11 +299,16 @@ def _grow(
     factor,
     trace,
     first,
+    forbidden,
+    avoid,
 ):
     """Add terminals ``first`` .. N - 1 (in place). Returns (sites drawn, final distance factor).
 
     Node layout: inlets [0, K), terminal i at K + i, the bifurcation made by terminal i at
     N + i. ``trace`` float64 (N, 3): C_v, C_w after each terminal, and sites drawn for it.
+    With ``avoid``, a connection whose new segments cross a nonzero voxel of ``forbidden`` (uint8,
+    the sites' grid) is not made: the cheapest other candidate is, and a site with none is
+    refused like one too close to the tree (without shrinking the distance criterion).
     """
     k_in = first  # the first K terminals (one per inlet) are in place
     n_total = parent.size // 2
@@ -204,11 +317,17 @@ def _grow(
     best_bif = np.empty(3)
     cand = np.empty(n_candidates, dtype=np.int64)
     cand_d = np.empty(n_candidates)
+    cand_vol = np.empty(n_candidates)
+    cand_pow = np.empty(n_candidates)
+    cand_bif = np.empty((n_candidates, 3))
+    refused = np.zeros(n_candidates, dtype=np.bool_)
     drawn = 0
     for i in range(first, n_total):
         t = k_in + i
         n_segments = 2 * i - k_in  # non-inlet nodes: i terminals and i - K bifurcations
         tries = 0
+        too_close = 0
+        forbidden_refusals = 0
         while True:
             if random_sites:
                 _draw_site(rng, voxels, shape, origin, voxel_size, planar, site)
@@ -237,18 +356,46 @@ def _grow(
                     if n_c < n_candidates:
                         n_c += 1
             if ok:
-                break
-            if tries % max_tries == 0:
+                best = -1
+                best_vol = 0.0
+                best_pow = 0.0
+                for c in range(n_c):
+                    d_vol, d_pow = connection_cost(
+                        parent, n_down, seg_length, position, w_vol, w_pow, cand[c], site, bif
+                    )
+                    cand_vol[c], cand_pow[c] = d_vol, d_pow
+                    cand_bif[c] = bif
+                    if best < 0 or d_vol + d_pow < best_vol + best_pow:
+                        best, best_vol, best_pow = cand[c], d_vol, d_pow
+                        best_bif[:] = bif
+                if not avoid or forbidden_refusals >= MAX_FORBIDDEN_REFUSALS:
+                    break
+                c = _cheapest_allowed(
+                    forbidden,
+                    origin,
+                    voxel_size,
+                    parent,
+                    position,
+                    cand,
+                    cand_vol,
+                    cand_pow,
+                    cand_bif,
+                    n_c,
+                    site,
+                    refused,
+                )
+                best = cand[c] if c >= 0 else -1
+                if c >= 0:
+                    best_vol, best_pow = cand_vol[c], cand_pow[c]
+                    best_bif[:] = cand_bif[c]
+                if best >= 0:
+                    break
+                forbidden_refusals += 1
+                continue
+            too_close += 1
+            if too_close % max_tries == 0:
                 factor *= shrink
         drawn += tries
-        best = -1
-        best_vol = 0.0
-        best_pow = 0.0
-        for c in range(n_c):
-            d_vol, d_pow = connection_cost(parent, n_down, seg_length, position, w_vol, w_pow, cand[c], site, bif)
-            if best < 0 or d_vol + d_pow < best_vol + best_pow:
-                best, best_vol, best_pow = cand[c], d_vol, d_pow
-                best_bif[:] = bif
         # Join t below ``best`` through the new bifurcation b.
         b = n_total + i
         p = parent[best]
@@ -300,16 +447,96 @@ def _site_order(problem, rng: np.ndarray) -> np.ndarray | None:
     return sites
 
 
-def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
-    """The CCO tree of ``problem``, drawing from ``rng`` (uint64 (4,), advanced in place).
+@dataclass(frozen=True)
+class SiteDomain:
+    """Where random terminal sites are drawn: a set of voxels of an isotropic grid.
 
-    Returns (tree, trace (N, 3): C_v, C_w after each terminal and sites drawn for it,
-    sites drawn in all, final distance factor). The anneal's ``anneal.init=cco`` uses this.
+    Attributes
+    ----------
+    voxels : int64 (n_voxels,)
+        Flat (z, y, x) indices of the voxels, increasing.
+    shape : (nz, ny, nx)
+    origin : float64 (3,)
+        [x, y, z] of the centre of voxel [0, 0, 0] [m].
+    voxel_size : float
+        Edge of the voxels [m].
+    ndim : int
+        3, or 2 for one voxel layer (no offset in z).
     """
-    physics, tissue = problem.physics, problem.tissue
-    method = problem.config.method
-    n, k = physics.n_terminals, physics.n_inlets
-    tables = cost_tables(physics)
+
+    voxels: np.ndarray
+    shape: tuple
+    origin: np.ndarray
+    voxel_size: float
+    ndim: int
+
+    @classmethod
+    def of_tissue(cls, tissue) -> "SiteDomain":
+        """The tissue voxels of a :class:`~vasc_pipeline.model.tissue.Tissue`."""
+        voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
+        return cls(voxels, tuple(tissue.shape), tissue.origin, float(tissue.voxel_size), int(tissue.ndim))
+
+    @property
+    def measure(self) -> float:
+        """Volume [m^3] (area [m^2] when ``ndim`` is 2) of the voxels, as Tissue.measure counts it."""
+        return self.voxels.size * self.voxel_size**self.ndim
+
+    def draw(self, n: int, rng: np.ndarray) -> np.ndarray:
+        """``n`` uniform points in the voxels (:func:`~vasc_pipeline.model.tree.sites_in_voxels`)."""
+        return sites_in_voxels(self.voxels, self.shape, self.origin, self.voxel_size, self.ndim, n, rng)
+
+
+@dataclass
+class Grown:
+    """The arrays of a CCO growth (:func:`grow_arrays`), in the layout of :class:`~vasc_pipeline.model.tree.Tree`."""
+
+    parent: np.ndarray  # int64 (2N,)
+    children: np.ndarray  # int64 (2N, 2)
+    position: np.ndarray  # float64 (2N, 3), m
+    n_down: np.ndarray  # int64 (2N,)
+    trace: np.ndarray  # float64 (N, 3): C_v, C_w after each terminal, sites drawn for it
+    costs: np.ndarray  # float64 (2,): C_v, C_w of the grown tree [W], the running sums
+    drawn: int
+    factor: float
+
+
+def grow_arrays(
+    inlets: np.ndarray,
+    n_terminals: int,
+    tables,
+    domain: SiteDomain,
+    method,
+    rng: np.ndarray,
+    sites: np.ndarray | None = None,
+    forbidden: np.ndarray | None = None,
+) -> Grown:
+    """Grow N terminals from fixed inlets: the CCO growth on plain arrays, without a Problem.
+
+    Parameters
+    ----------
+    inlets : float64 (K, 3)
+        Inlet positions [m].
+    n_terminals : int
+        N.
+    tables : CostTables
+        :func:`~vasc_pipeline.model.physics.cost_tables` of the physics whose radius law the
+        weights w(n) follow (rows up to n = N at least).
+    domain : SiteDomain
+        Where random sites are drawn (and whose measure sets the distance criterion).
+    method
+        ``candidates``, ``max_tries`` and ``shrink`` (a :class:`~vasc_pipeline.config.MethodConfig`).
+    rng : uint64 (4,)
+        The generator, advanced in place.
+    sites : float64 (N, 3), optional
+        Given sites in the order they are added (then ``domain`` draws nothing).
+    forbidden : uint8 (z, y, x), optional
+        On the domain's grid: voxels no new segment may cross (cavities). A connection that
+        would is not made (the cheapest other candidate is; a site with none is drawn again),
+        and random first sites are drawn again until their straight joins to the inlets cross
+        none (given ones are taken as they are).
+    """
+    inlets = np.atleast_2d(np.asarray(inlets, dtype=np.float64))
+    n, k = int(n_terminals), len(inlets)
     w_vol = np.ascontiguousarray(tables.volume)
     w_pow = np.ascontiguousarray(tables.power)
     m = 2 * n
@@ -318,13 +545,22 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
     position = np.zeros((m, 3))
     n_down = np.zeros(m, dtype=np.int64)
     seg_length = np.zeros(m)
-    position[:k] = tissue.inlets
-    sites = _site_order(problem, rng)
-    first = random_terminal_sites(tissue, k, rng) if sites is None else sites[:k]
+    position[:k] = inlets
+    avoid = forbidden is not None and bool(np.any(forbidden))
+    if avoid:
+        forbidden = np.ascontiguousarray(forbidden, dtype=np.uint8)
+        grid_origin = np.ascontiguousarray(domain.origin, dtype=np.float64)
+    else:  # numba's argument types stay those of the unconstrained growth
+        forbidden = np.zeros((1, 1, 1), dtype=np.uint8)
+    first = domain.draw(k, rng) if sites is None else sites[:k]
+    for _ in range(MAX_FORBIDDEN_REFUSALS if avoid and sites is None else 0):
+        if not any(crosses(forbidden, grid_origin, domain.voxel_size, inlets[j], first[j]) for j in range(k)):
+            break
+        first = domain.draw(k, rng)
     # The first K terminals go straight to the inlets, by the cheapest assignment.
     best = min(
         itertools.permutations(range(k)),
-        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - tissue.inlets[j]) for j in range(k)),
+        key=lambda perm: sum(np.linalg.norm(first[perm[j]] - inlets[j]) for j in range(k)),
     )
     costs, compensation = np.zeros(2), np.zeros(2)
     trace = np.zeros((n, 3))
@@ -338,7 +574,6 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         _add(costs, compensation, 0, float(w_vol[1]) * seg_length[t])
         _add(costs, compensation, 1, float(w_pow[1]) * seg_length[t])
         trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
-    voxels = np.flatnonzero(tissue.mask.reshape(-1)).astype(np.int64)
     # one argument per flat array, as _grow's signature lists them (numba takes no struct)
     drawn, factor = _grow(
         parent,
@@ -353,22 +588,45 @@ def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
         w_pow,
         sites if sites is not None else np.zeros((0, 3)),
         sites is None,
-        voxels,
-        np.array(tissue.shape, dtype=np.int64),
-        np.ascontiguousarray(tissue.origin, dtype=np.float64),
-        float(tissue.voxel_size),
-        tissue.ndim == 2,
-        float(tissue.measure),
-        int(tissue.ndim),
+        domain.voxels,
+        np.array(domain.shape, dtype=np.int64),
+        np.ascontiguousarray(domain.origin, dtype=np.float64),
+        float(domain.voxel_size),
+        domain.ndim == 2,
+        float(domain.measure),
+        int(domain.ndim),
         int(method.candidates),
         int(method.max_tries),
         float(method.shrink),
         1.0,
         trace,
         k,
+        forbidden,
+        avoid,
     )
-    tree = Tree(parent, children, position, n_down, k)
-    return tree, trace, int(drawn) + k, float(factor)
+    return Grown(parent, children, position, n_down, trace, costs + compensation, int(drawn) + k, float(factor))
+
+
+def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:
+    """The CCO tree of ``problem``, drawing from ``rng`` (uint64 (4,), advanced in place).
+
+    Returns (tree, trace (N, 3): C_v, C_w after each terminal and sites drawn for it,
+    sites drawn in all, final distance factor). The anneal's ``anneal.init=cco`` uses this.
+    """
+    physics, tissue, method = problem.physics, problem.tissue, problem.config.method
+    sites = _site_order(problem, rng)
+    grown = grow_arrays(
+        tissue.inlets,
+        physics.n_terminals,
+        cost_tables(physics),
+        SiteDomain.of_tissue(tissue),
+        method,
+        rng,
+        sites,
+        forbidden=tissue.cavity.astype(np.uint8) if method.avoid_cavities else None,
+    )
+    tree = Tree(grown.parent, grown.children, grown.position, grown.n_down, physics.n_inlets)
+    return tree, grown.trace, grown.drawn, grown.factor
 
 
 def grow(problem, seed: int | None = None, rng: np.ndarray | None = None) -> CCOResult:

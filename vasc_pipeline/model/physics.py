@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["Physics", "CostTables", "cost_tables", "supply_radius"]
+__all__ = ["Physics", "CostTables", "cost_tables", "segment_factors", "supply_radius"]
 
 # Row order of the table array handed to the kernel.
 TABLE_VOLUME, TABLE_POWER, TABLE_EXCLUSION, TABLE_RESISTANCE, TABLE_FLOW = range(5)
@@ -126,7 +126,13 @@ class CostTables:
 
 def cost_tables(physics: Physics) -> CostTables:
     """Build the n-indexed cost factors of every segment term (n = 0 row is zero)."""
-    n = np.arange(physics.n_terminals + 1, dtype=np.float64)
+    return CostTables(segment_factors(physics, np.arange(physics.n_terminals + 1)))
+
+
+def segment_factors(physics: Physics, n_downstream: np.ndarray) -> np.ndarray:
+    """float64 (5, len(n)): the rows of :class:`CostTables` for segments with ``n_downstream``
+    terminals only (a tree of 10^6 terminals needs a few of its 10^6 rows)."""
+    n = np.asarray(n_downstream, dtype=np.float64)
     r = physics.radius(n)
     q = physics.flow(n)
     area = math.pi * r**2
@@ -138,7 +144,7 @@ def cost_tables(physics: Physics) -> CostTables:
     table[TABLE_EXCLUSION] = np.where(r > physics.r_cutoff, area, 0.0)
     table[TABLE_RESISTANCE] = resistance
     table[TABLE_FLOW] = q
-    return CostTables(table)
+    return table
 
 
 def supply_radius(

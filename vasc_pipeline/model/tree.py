@@ -113,13 +113,23 @@ def tree_from_arrays(parent: np.ndarray, position: np.ndarray, n_inlets: int | N
 def random_terminal_sites(tissue: Tissue, n_terminals: int, state: np.ndarray) -> np.ndarray:
     """Uniform random points in the tissue: a random tissue voxel, then a uniform offset in it."""
     voxels = np.flatnonzero(tissue.mask.reshape(-1))
-    u = np.empty((n_terminals, 4))
+    return sites_in_voxels(voxels, tissue.shape, tissue.origin, tissue.voxel_size, tissue.ndim, n_terminals, state)
+
+
+def sites_in_voxels(voxels, shape, origin, voxel_size: float, ndim: int, n: int, state: np.ndarray) -> np.ndarray:
+    """float64 (n, 3) uniform random points [m] in a set of voxels of a grid (four uniforms a point).
+
+    ``voxels``: flat (z, y, x) indices into a grid of ``shape`` whose voxel [0, 0, 0] is centred
+    at ``origin`` [m]; a point is a random voxel of the set, then a uniform offset in it (none
+    in z when ``ndim`` is 2). The draw of :func:`random_terminal_sites`, for any voxel set.
+    """
+    u = np.empty((n, 4))
     _rng.fill_uniform(state, u)
     pick = voxels[np.minimum((u[:, 0] * voxels.size).astype(np.int64), voxels.size - 1)]
-    z, y, x = np.unravel_index(pick, tissue.shape)
-    centre = tissue.origin + tissue.voxel_size * np.stack([x, y, z], axis=1)
-    offset = (u[:, 1:] - 0.5) * tissue.voxel_size
-    if tissue.ndim == 2:
+    z, y, x = np.unravel_index(pick, shape)
+    centre = origin + voxel_size * np.stack([x, y, z], axis=1)
+    offset = (u[:, 1:] - 0.5) * voxel_size
+    if ndim == 2:
         offset[:, 2] = 0.0
     return centre + offset
 

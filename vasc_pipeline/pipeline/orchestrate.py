@@ -596,7 +596,8 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
     (reduction, figures, exports) failed, or the cluster started no worker or job within
     ``cluster.startup_timeout``; Ctrl-C gives 130 (rerun to resume). A finished sweep is
     reduced; ``stage="reduce"`` (``+stage=reduce``) only reduces the runs already in
-    ``output_dir`` (:func:`reduce_stage`).
+    ``output_dir`` (:func:`reduce_stage`), ``stage="extend"`` (``+stage=extend``) grows the whole
+    tree below them (:func:`vasc_pipeline.pipeline.extend.extend_stage`).
     """
     from ..model.tissue import TissueError
     from ..model.tree import TreeError
@@ -605,6 +606,12 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
     if getattr(cfg, "stage", "run") == "reduce":
         return reduce_stage(cfg, stream)
     terminated: list[int] = []
+    if getattr(cfg, "stage", "run") == "extend":
+        from .extend import extend_stage
+
+        with _terminate_as_interrupt(terminated):
+            status = extend_stage(cfg, stream)
+        return 128 + signal.SIGTERM if terminated and status == 130 else status
     try:
         with _terminate_as_interrupt(terminated):
             result = run_sweep(cfg, stream=stream)

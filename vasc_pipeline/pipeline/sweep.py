@@ -67,7 +67,7 @@ class Job:
 
 
 def stored_config(run_cfg: RunConfig) -> dict:
-    """The config dict a run store holds: the resolved run config without sweep, cluster and stage.
+    """The config dict a run store holds: the resolved run config without sweep, cluster, stage and extend.
 
     Sections that cannot affect the run are left out: ``method`` (the CCO settings) for an
     anneal from a random tree, ``anneal`` for a CCO run (no schedule changes it). Keys that
@@ -77,6 +77,7 @@ def stored_config(run_cfg: RunConfig) -> dict:
     config = asdict(run_cfg)
     del config["sweep"], config["cluster"]  # how a run is scheduled is not part of it
     config.pop("stage", None)
+    config.pop("extend", None)  # what +stage=extend does with a run, not the run
     if run_cfg.method.name == "anneal" and run_cfg.anneal.init == "random":
         config.pop("method", None)
     if run_cfg.method.name == "cco":

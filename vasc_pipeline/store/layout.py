@@ -10,6 +10,7 @@
         comparison_summary.csv     per cell, the mean errors
         trees/<run_id>.vtp, .csv   the best trees' exports (vasc_pipeline.reduce.export)
         figures/*.png              the figures (vasc_pipeline.figures)
+        extended/<run_id>.zarr     the whole tree below a run (+stage=extend, vasc_pipeline.store.extended)
 
 A run's id names its store: :func:`run_id` = :func:`cell_id` (the grid point without the
 seed, the reduction's cell) plus the seed.
@@ -31,11 +32,13 @@ __all__ = [
     "ANATOMY_CSV",
     "TREES_DIR",
     "FIGURES_DIR",
+    "EXTENDED_DIR",
     "cell_id",
     "coords_cell_id",
     "run_id",
     "run_path",
     "run_store_paths",
+    "extended_path",
 ]
 
 LOCK_NAME = ".vasc_pipeline.lock"
@@ -47,6 +50,7 @@ COMPARISON_SUMMARY_CSV = "comparison_summary.csv"
 ANATOMY_CSV = "anatomy.csv"
 TREES_DIR = "trees"
 FIGURES_DIR = "figures"
+EXTENDED_DIR = "extended"
 
 
 def _number(value: float) -> str:
@@ -88,3 +92,8 @@ def run_store_paths(output_dir: str | os.PathLike) -> list[Path]:
     """Every run store under ``<output_dir>/runs``, sorted by name (none without the folder)."""
     root = Path(output_dir) / RUNS_DIR
     return sorted(root.glob("*.zarr")) if root.is_dir() else []
+
+
+def extended_path(output_dir: str | os.PathLike, run_id: str) -> Path:
+    """The whole tree below run ``run_id``: ``<output_dir>/extended/<run_id>.zarr``."""
+    return Path(output_dir) / EXTENDED_DIR / f"{run_id}.zarr"
