@@ -9,7 +9,7 @@ from dataclasses import FrozenInstanceError, asdict, replace
 import pytest
 
 from vasc_pipeline import config, engine
-from vasc_pipeline.config import schema
+from vasc_pipeline.config import checks
 from vasc_pipeline.config.frozen import is_frozen
 from vasc_pipeline.pipeline import planning
 
@@ -98,8 +98,8 @@ def test_a_swept_key_and_its_axis_share_one_rule():
 def validations(monkeypatch):
     """How many times validate() checks a config (a frozen one is not checked)."""
     calls = []
-    check = schema._validate_method  # called once by every validation that checks
-    monkeypatch.setattr(schema, "_validate_method", lambda cfg: (calls.append(1), check(cfg))[1])
+    check = checks._validate_method  # called once by every validation that checks
+    monkeypatch.setattr(checks, "_validate_method", lambda cfg: (calls.append(1), check(cfg))[1])
     return calls
 
 

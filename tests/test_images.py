@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 from helpers import ENV, REPO, make_problem
-from vasc_pipeline.tissue import TissueError, build_tissue
-from vasc_pipeline.tissue import images as img
 
 from vasc_pipeline.config import ConfigError
+from vasc_pipeline.model.tissue import TissueError, build_tissue
+from vasc_pipeline.model.tissue import images as img
 
 nibabel = pytest.importorskip("nibabel", reason="nibabel (pip install -e '.[test]') reads NIfTI")
 nrrd = pytest.importorskip("nrrd", reason="pynrrd (pip install -e '.[test]') reads NRRD")

@@ -1,10 +1,9 @@
-"""The package's layout: stage subpackages, short modules, no import circle, old paths still import."""
+"""The package's layout: stage subpackages, short modules, no import circle, no import-time magic."""
 
 from __future__ import annotations
 
 import ast
 import importlib
-import warnings
 from pathlib import Path
 
 import pytest
@@ -88,30 +87,31 @@ def test_every_kernel_module_declares_its_names():
 
 
 @pytest.mark.parametrize("name", sorted(vasc_pipeline._SHORT_NAMES))
-def test_short_names_are_their_stage_modules_without_warning(name):
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        old = importlib.import_module(f"vasc_pipeline.{name}")
-    assert old is importlib.import_module(f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}")
-    assert old.__spec__.name == old.__name__ == f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}"
+def test_short_names_are_their_stage_modules(name):
+    module = getattr(vasc_pipeline, name)
+    assert module is importlib.import_module(f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}")
+    assert module.__spec__.name == module.__name__ == f"vasc_pipeline.{vasc_pipeline._SHORT_NAMES[name]}"
 
 
-@pytest.mark.parametrize("name", sorted(vasc_pipeline._DEPRECATED))
-def test_former_module_paths_are_deprecated_aliases(name):
+def test_importing_the_package_changes_no_import_machinery_and_stars_nothing():
     import sys
 
-    sys.modules.pop(f"vasc_pipeline.{name}", None)
-    with pytest.warns(DeprecationWarning, match=f"vasc_pipeline.{name} moved to"):
-        old = importlib.import_module(f"vasc_pipeline.{name}")
-    assert old is importlib.import_module(f"vasc_pipeline.{vasc_pipeline._DEPRECATED[name]}")
+    assert not [f for f in sys.meta_path if type(f).__module__.startswith("vasc_pipeline")]
+    for name, path in modules().items():
+        tree = ast.parse(path.read_text())
+        stars = [n for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and any(a.name == "*" for a in n.names)]
+        assert not stars, name
+        if path.name == "__init__.py":  # every package says what it offers
+            assert any(
+                isinstance(n, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in n.targets)
+                for n in tree.body
+            ), name
 
 
-def test_submodules_of_an_alias_are_the_same_modules():
-    from vasc_pipeline.tissue.grid import Tissue
+def test_the_version_is_the_installed_metadata():
+    from importlib.metadata import version
 
-    from vasc_pipeline.model.tissue import grid
-
-    assert Tissue is grid.Tissue
+    assert vasc_pipeline.__version__ == version("vasc_pipeline")
 
 
 def test_the_readme_api_imports():

@@ -214,7 +214,7 @@ def test_reduce_while_a_sweep_holds_the_directory_names_the_runs_and_the_sweep(t
 
 
 def test_a_nan_in_the_terminals_csv_is_named_as_such(tmp_path, recwarn):
-    from vasc_pipeline.tree import TreeError
+    from vasc_pipeline.model.tree import TreeError
 
     problem = engine.build_problem(config.compose(TINY_RUN))
     sites = engine.initial_state(problem, seed=0).position[1:17]
@@ -237,7 +237,7 @@ def test_an_output_dir_that_is_a_file_is_refused_as_such(tmp_path):
 
 
 def test_duplicate_terminal_sites_warn_and_are_refused_when_fixed(tmp_path):
-    from vasc_pipeline.tree import TreeError
+    from vasc_pipeline.model.tree import TreeError
 
     problem = engine.build_problem(config.compose(TINY_RUN))
     sites = engine.initial_state(problem, seed=0).position[1:17]
@@ -328,7 +328,8 @@ def bad_inputs(tmp_path_factory):
     try:
         import nibabel
         import nrrd
-        from vasc_pipeline.tissue import images
+
+        from vasc_pipeline.model.tissue import images
     except ImportError:  # the label-map cases skip themselves
         return d
     images.write_label_map(d / "heart.nii.gz", LABELS, 1e-3, [0.0, 0.0, 0.0])

@@ -12,9 +12,9 @@ import sys
 import numpy as np
 import pytest
 from helpers import ENV, REPO
-from vasc_pipeline.physics import Physics, cost_tables
 
 from vasc_pipeline import config, costs, engine, job, sweep
+from vasc_pipeline.model.physics import Physics, cost_tables
 from vasc_pipeline.model.tree import tree_from_arrays
 from vasc_pipeline.reduce import zerod
 

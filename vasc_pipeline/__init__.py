@@ -12,16 +12,17 @@ The stages of the data's path, one subpackage each::
     figures/   matplotlib figures of a reduced sweep
 
 Short names: ``from vasc_pipeline import tissue, tree, physics, costs, cco, sweep, job,
-morphometry, reference, summary, export`` import the modules of their stage
-(:data:`_SHORT_NAMES`); the former flat module paths of the rest still import, with a
-DeprecationWarning (:data:`_DEPRECATED`).
+morphometry, reference, summary, export`` give the modules of their stage (imported on first
+use); ``from vasc_pipeline import config, engine, reduce, ...`` the stage packages.
 """
 
 import importlib
-import importlib.abc
-import importlib.machinery
-import sys
-import warnings
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("vasc_pipeline")
+except PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
 
 # Short public names of modules that live in a stage subpackage (the README's Python API).
 _SHORT_NAMES = {
@@ -37,64 +38,20 @@ _SHORT_NAMES = {
     "summary": "reduce.summary",
     "export": "reduce.export",
 }
-# Former flat module paths, kept as deprecated aliases of their new homes.
-_DEPRECATED = {
-    "pipeline_config": "config.pipeline",
-    "identity": "config.identity",
-    "topology": "model.topology",
-    "geometry": "model.geometry",
-    "rng": "model.rng",
-    "topology_search": "model.topology_search",
-    "packing": "kernel.packing",
-    "finish": "engine.polish",
-    "fermat": "engine.fermat",
-    "planning": "pipeline.planning",
-    "orchestrate": "pipeline.orchestrate",
-    "cluster": "pipeline.cluster",
-    "progress": "pipeline.progress",
-    "outdir": "pipeline.outdir",
-    "checkpoints": "store.checkpoints",
-    "runs": "reduce.runs",
-    "ordering": "reduce.ordering",
-    "similarity": "reduce.similarity",
-}
+_STAGES = ("config", "model", "kernel", "engine", "pipeline", "store", "reduce", "figures")
+
+__all__ = ["__version__", *_STAGES, *_SHORT_NAMES]
 
 
-class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """``vasc_pipeline.<old>[.sub]`` -> the module object of ``vasc_pipeline.<new>[.sub]``.
-
-    The alias is the same module object (one set of classes and numba functions), not a copy.
-    """
-
-    def find_spec(self, fullname, path=None, target=None):
-        head, _, rest = fullname.partition(".")
-        if head != __name__ or not rest:
-            return None
-        name, _, sub = rest.partition(".")
-        new = _SHORT_NAMES.get(name) or _DEPRECATED.get(name)
-        if new is None:
-            return None
-        target_name = f"{__name__}.{new}" + (f".{sub}" if sub else "")
-        spec = importlib.machinery.ModuleSpec(fullname, self)
-        spec.loader_state = (target_name, name in _DEPRECATED and not sub)
-        return spec
-
-    def create_module(self, spec):
-        target_name, deprecated = spec.loader_state
-        if deprecated:
-            warnings.warn(
-                f"{spec.name} moved to {target_name}; the old path is a deprecated alias",
-                DeprecationWarning,
-                stacklevel=2,
-            )
-        module = importlib.import_module(target_name)
-        spec.loader_state = (target_name, deprecated, module.__spec__)
-        return module
-
-    def exec_module(self, module):
-        # the import system set the alias's spec on the module: give it back its own
-        module.__spec__ = module.__spec__.loader_state[2]
+def __getattr__(name: str):
+    """A stage package or a short name's module, imported when first asked for (PEP 562): importing
+    the package stays cheap, and ``from vasc_pipeline import job`` gives the module itself."""
+    if name in _STAGES:
+        return importlib.import_module(f"{__name__}.{name}")
+    if name in _SHORT_NAMES:
+        return importlib.import_module(f"{__name__}.{_SHORT_NAMES[name]}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-if not any(isinstance(finder, _Alias) for finder in sys.meta_path):
-    sys.meta_path.insert(0, _Alias())
+def __dir__():
+    return sorted(__all__)

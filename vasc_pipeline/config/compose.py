@@ -7,7 +7,8 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from .schema import CONFIG_DIR, ConfigError, RunConfig, SweepConfig, to_run_config, validate
+from .checks import validate
+from .schema import CONFIG_DIR, ConfigError, RunConfig, SweepConfig, to_run_config
 
 __all__ = [
     "compose",

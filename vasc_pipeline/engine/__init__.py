@@ -10,11 +10,58 @@ Hydra or Dask::
     result = engine.run(config.compose(["tissue=plane2d"]), seed=0)
 """
 
-from . import problem as _problem
-from . import run as _run
-from .problem import *  # noqa: F403
-from .problem import scheduled_T_end, seed_state
-from .run import *  # noqa: F403
-from .run import accepted_moves
+from .problem import (
+    CHECKPOINT_FIELDS,
+    Problem,
+    build_problem,
+    calibrate_schedule,
+    initial_state,
+    model_at,
+    node_radii,
+    restore_state,
+    running_costs,
+    scheduled_T_end,
+    seed_state,
+    state_arrays,
+    state_from_tree,
+    supply_dtype,
+    tree_of,
+    tree_statistics,
+)
+from .run import (
+    RunResult,
+    Trace,
+    accepted_moves,
+    anneal_blocks,
+    finish,
+    run,
+    run_block,
+    run_phase,
+)
 
-__all__ = [*_problem.__all__, *_run.__all__, "scheduled_T_end", "seed_state", "accepted_moves"]
+__all__ = [
+    "Problem",
+    "build_problem",
+    "initial_state",
+    "state_from_tree",
+    "calibrate_schedule",
+    "model_at",
+    "running_costs",
+    "tree_of",
+    "tree_statistics",
+    "state_arrays",
+    "restore_state",
+    "node_radii",
+    "supply_dtype",
+    "CHECKPOINT_FIELDS",
+    "RunResult",
+    "Trace",
+    "run_block",
+    "run_phase",
+    "anneal_blocks",
+    "finish",
+    "run",
+    "scheduled_T_end",
+    "seed_state",
+    "accepted_moves",
+]

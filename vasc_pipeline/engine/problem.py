@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from .. import kernel
-from ..config.schema import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config, validate
+from ..config.checks import validate
+from ..config.schema import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config
 from ..model.costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, total_cost
 from ..model.physics import Physics, cost_tables, supply_radius
 from ..model.rng import seed_state

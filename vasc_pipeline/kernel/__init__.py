@@ -24,23 +24,136 @@ Every function is module-level and compiled with :mod:`vasc_pipeline._jit`'s fla
 that another module's kernel inlines, compiles afresh.
 """
 
-from . import cells, exclusion, loop, moves, pressure, schedule, state, supply
-from .cells import *  # noqa: F403
-from .exclusion import *  # noqa: F403
-from .loop import *  # noqa: F403
-from .moves import *  # noqa: F403
-from .pressure import *  # noqa: F403
-from .schedule import *  # noqa: F403
-from .state import *  # noqa: F403
-from .supply import *  # noqa: F403
+from .cells import (
+    build_cells,
+    neighbour_partner,
+)
+from .exclusion import (
+    LEAP_BLOCK,
+    PREFETCH_LEAD,
+    depth_fields,
+    exclusion_fields,
+    leap_map,
+    recompute_exclusion,
+    segment_exclusion,
+    segment_exclusion_capped,
+)
+from .loop import (
+    anneal_block,
+    initialise,
+    initialise_segments,
+    sample_uphill,
+    scaled_total_without_supply,
+    translate_node,
+)
+from .moves import (
+    legal_position,
+    swap_nodes,
+    swap_random,
+)
+from .pressure import (
+    pressure_cost,
+)
+from .schedule import (
+    supply_weight,
+    temperature,
+    weighted_total,
+)
+from .state import (
+    ACCEPTED,
+    COUNTER_BIFURCATION_ACCEPTED,
+    COUNTER_BIFURCATION_PROPOSED,
+    COUNTER_LOCAL_SWAP_PROPOSED,
+    COUNTER_STEP,
+    COUNTER_SWAP_ACCEPTED,
+    COUNTER_SWAP_PROPOSED,
+    COUNTER_TERMINAL_ACCEPTED,
+    COUNTER_TERMINAL_PROPOSED,
+    COUNTER_WINDOW_BIFURCATION_ACCEPTED,
+    COUNTER_WINDOW_BIFURCATION_PROPOSED,
+    COUNTER_WINDOW_TERMINAL_ACCEPTED,
+    COUNTER_WINDOW_TERMINAL_PROPOSED,
+    EXCLUSION,
+    ILLEGAL,
+    MOVE_COUNTERS,
+    N_ACCEPTED,
+    N_COUNTERS,
+    N_PROPOSED,
+    POWER,
+    PRESSURE,
+    REJECTED,
+    SUPPLY,
+    VOLUME,
+    WINDOW_COUNTERS,
+    Model,
+    State,
+)
+from .supply import (
+    SHELL_BANDS,
+    SHELL_WIDTH,
+    in_tissue,
+    shell_capacity,
+    supply_move,
+    supply_move_delta,
+    supply_sphere,
+)
 
 __all__ = [
-    *state.__all__,
-    *schedule.__all__,
-    *exclusion.__all__,
-    *supply.__all__,
-    *pressure.__all__,
-    *cells.__all__,
-    *moves.__all__,
-    *loop.__all__,
+    "ACCEPTED",
+    "COUNTER_BIFURCATION_ACCEPTED",
+    "COUNTER_BIFURCATION_PROPOSED",
+    "COUNTER_LOCAL_SWAP_PROPOSED",
+    "COUNTER_STEP",
+    "COUNTER_SWAP_ACCEPTED",
+    "COUNTER_SWAP_PROPOSED",
+    "COUNTER_TERMINAL_ACCEPTED",
+    "COUNTER_TERMINAL_PROPOSED",
+    "COUNTER_WINDOW_BIFURCATION_ACCEPTED",
+    "COUNTER_WINDOW_BIFURCATION_PROPOSED",
+    "COUNTER_WINDOW_TERMINAL_ACCEPTED",
+    "COUNTER_WINDOW_TERMINAL_PROPOSED",
+    "EXCLUSION",
+    "ILLEGAL",
+    "MOVE_COUNTERS",
+    "Model",
+    "N_ACCEPTED",
+    "N_COUNTERS",
+    "N_PROPOSED",
+    "POWER",
+    "PRESSURE",
+    "REJECTED",
+    "SUPPLY",
+    "State",
+    "VOLUME",
+    "WINDOW_COUNTERS",
+    "supply_weight",
+    "temperature",
+    "weighted_total",
+    "LEAP_BLOCK",
+    "PREFETCH_LEAD",
+    "depth_fields",
+    "exclusion_fields",
+    "leap_map",
+    "recompute_exclusion",
+    "segment_exclusion",
+    "segment_exclusion_capped",
+    "SHELL_BANDS",
+    "SHELL_WIDTH",
+    "in_tissue",
+    "shell_capacity",
+    "supply_move",
+    "supply_move_delta",
+    "supply_sphere",
+    "pressure_cost",
+    "build_cells",
+    "neighbour_partner",
+    "legal_position",
+    "swap_nodes",
+    "swap_random",
+    "anneal_block",
+    "initialise",
+    "initialise_segments",
+    "sample_uphill",
+    "scaled_total_without_supply",
+    "translate_node",
 ]

@@ -8,3 +8,5 @@ flat node layout), :mod:`~vasc_pipeline.model.physics` (radii, flows, cost table
 (exhaustive optimum of small instances), :mod:`~vasc_pipeline.model.rng` (checkpointable
 random numbers).
 """
+
+__all__ = ["tissue", "tree", "physics", "costs", "topology", "geometry", "topology_search", "rng"]

@@ -100,7 +100,7 @@ def count_terminals(parent: np.ndarray, n_terminals: int, n_inlets: int) -> np.n
 
 
 def tree_from_arrays(parent: np.ndarray, position: np.ndarray, n_inlets: int | None = None) -> Tree:
-    """A :class:`~vasc_pipeline.tree.Tree` from a run store's ``parent`` and ``position`` arrays
+    """A :class:`~vasc_pipeline.model.tree.Tree` from a run store's ``parent`` and ``position`` arrays
     (inlets first, then the N terminals, then the bifurcations)."""
     parent = np.asarray(parent, dtype=np.int64)
     k = int(np.count_nonzero(parent < 0)) if n_inlets is None else int(n_inlets)

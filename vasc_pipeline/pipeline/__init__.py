@@ -6,3 +6,5 @@ new runs), :mod:`~vasc_pipeline.pipeline.orchestrate` (``python -m vasc_pipeline
 :mod:`~vasc_pipeline.pipeline.cluster` (the Dask client), :mod:`~vasc_pipeline.pipeline.progress`
 (the live line), :mod:`~vasc_pipeline.pipeline.outdir` (lock, writability, Hydra callback).
 """
+
+__all__ = ["sweep", "job", "planning", "orchestrate", "cluster", "progress", "outdir", "extend"]

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Progress", "print_summary", "runs_phrase", "PROGRESS_TOPIC"]
 
-PROGRESS_TOPIC = "vasc_pipeline.progress"  # a Dask topic name, not a module path
+PROGRESS_TOPIC = "vasc_pipeline.pipeline.progress"  # a Dask topic name, not a module path
 
 
 def runs_phrase(n: int) -> str:

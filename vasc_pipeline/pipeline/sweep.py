@@ -18,8 +18,9 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from ..config.checks import validate
 from ..config.identity import INPUTS, input_digests
-from ..config.schema import ConfigError, RunConfig, from_stored, sweep_axis, to_run_config, validate
+from ..config.schema import ConfigError, RunConfig, from_stored, sweep_axis, to_run_config
 from ..model.tissue.shapes import mask_geometry
 from ..store.layout import cell_id, run_id, run_path
 

@@ -7,8 +7,48 @@ orders, elements, statistics), :mod:`~vasc_pipeline.reduce.reference` (Kassab 19
 :mod:`~vasc_pipeline.reduce.similarity` (trunks), :mod:`~vasc_pipeline.reduce.export` (VTP, CSV).
 """
 
-from . import stage as _stage
-from .stage import *  # noqa: F403
-from .stage import remove_superseded_outputs
+from .stage import (
+    ANATOMY_CSV,
+    COMPARISON_CSV,
+    COMPARISON_LEVEL,
+    COMPARISON_SCHEME,
+    COMPARISON_SUMMARY_CSV,
+    SUMMARY_NAME,
+    Reduction,
+    ReductionError,
+    RunInfo,
+    anatomy_frame,
+    best_runs,
+    build_summary,
+    check_one_configuration,
+    comparison_frame,
+    find_runs,
+    format_anatomy,
+    format_comparison,
+    reduce,
+    remove_superseded_outputs,
+    write_summary,
+)
 
-__all__ = [*_stage.__all__, "remove_superseded_outputs"]
+__all__ = [
+    "RunInfo",
+    "Reduction",
+    "ReductionError",
+    "find_runs",
+    "check_one_configuration",
+    "best_runs",
+    "build_summary",
+    "write_summary",
+    "comparison_frame",
+    "anatomy_frame",
+    "format_comparison",
+    "format_anatomy",
+    "reduce",
+    "SUMMARY_NAME",
+    "COMPARISON_CSV",
+    "COMPARISON_SUMMARY_CSV",
+    "ANATOMY_CSV",
+    "COMPARISON_SCHEME",
+    "COMPARISON_LEVEL",
+    "remove_superseded_outputs",
+]

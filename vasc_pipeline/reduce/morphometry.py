@@ -442,7 +442,7 @@ def morphometry(
         n_contracted_segments=int(full_parent.size - kept.size),
         min_segment_length=float(min_segment_length),
         top_order=-1 if top is None else int(top),
-        ordering=f"diameter_defined: Jiang, Kassab & Fung 1994 {reading} reassignment (see vasc_pipeline.morphometry); "
-        "strahler: conventional Strahler",
+        ordering=f"diameter_defined: Jiang, Kassab & Fung 1994 {reading} reassignment "
+        "(vasc_pipeline.reduce.morphometry); strahler: conventional Strahler",
     )
     return ds

@@ -279,7 +279,7 @@ def build_summary(
                 attrs={
                     "units": "m",
                     "long_name": "mean distance between the main trunks of two seeds, over pairs of seeds "
-                    "(vasc_pipeline.similarity; NaN with one seed)",
+                    "(vasc_pipeline.reduce.similarity; NaN with one seed)",
                 },
             )
             for k in best

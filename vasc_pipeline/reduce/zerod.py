@@ -2,10 +2,10 @@
 simulations of generated trees start from.
 
 One ``BloodVessel`` per segment with its Poiseuille resistance 8 μ L / (π r⁴) (the model's,
-from :func:`vasc_pipeline.physics.cost_tables`), one junction per bifurcation (mass
+from :func:`vasc_pipeline.model.physics.cost_tables`), one junction per bifurcation (mass
 conservation, one pressure), a ``FLOW`` condition at each inlet's root segment with the model's
 flow n Q0 / N, and a ``PRESSURE`` condition at each terminal: the terminal pressure of the
-model's own Poiseuille solution (:func:`vasc_pipeline.costs.node_pressures`, from
+model's own Poiseuille solution (:func:`vasc_pipeline.model.costs.node_pressures`, from
 ``physics.pressure_inlet`` at the inlets). With these conditions the solver's steady solution
 is the model's: every terminal carries Q0 / N, the inlets are at ``pressure_inlet`` and the
 pumping power Σ Q ΔP is C_w. Swap the terminal conditions for your own (a ``RESISTANCE`` or

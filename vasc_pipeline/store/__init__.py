@@ -4,8 +4,50 @@
 (write, verify, fall back).
 """
 
-from . import run_store as _run_store
-from .run_store import *  # noqa: F403
-from .run_store import FORMAT, TRACE_CHUNK
+from .run_store import (
+    FORMAT,
+    RUNS_DIR,
+    STATUS_COMPLETE,
+    STATUS_RUNNING,
+    SWEEP_AXES,
+    TRACE_CHUNK,
+    TRACE_FIELDS,
+    Checkpoint,
+    CheckpointWarning,
+    RunStore,
+    StoreDamaged,
+    StoreError,
+    config_differences,
+    config_hash,
+    file_lock,
+    hashed_config,
+    identity_differences,
+    is_empty_leftover,
+    run_lock,
+    run_path,
+    verify_store,
+)
 
-__all__ = [*_run_store.__all__, "FORMAT", "TRACE_CHUNK"]
+__all__ = [
+    "RunStore",
+    "Checkpoint",
+    "CheckpointWarning",
+    "StoreError",
+    "StoreDamaged",
+    "verify_store",
+    "is_empty_leftover",
+    "run_path",
+    "run_lock",
+    "file_lock",
+    "config_hash",
+    "hashed_config",
+    "config_differences",
+    "identity_differences",
+    "SWEEP_AXES",
+    "TRACE_FIELDS",
+    "STATUS_RUNNING",
+    "STATUS_COMPLETE",
+    "RUNS_DIR",
+    "FORMAT",
+    "TRACE_CHUNK",
+]

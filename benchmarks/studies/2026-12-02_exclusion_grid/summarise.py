@@ -91,7 +91,7 @@ def trend(rows: list[dict]) -> list[str]:
 def upper_order_lengths(rows: list[dict], orders=(8, 9, 10)) -> list[str]:
     """|log10 model/Kassab| of the element length of ``orders`` (trunk at 11) against each
     artery's, at each variant's largest N, mean over seeds (the target: within 0.25 dex)."""
-    from vasc_pipeline.reference import kassab_dataset
+    from vasc_pipeline.reduce.reference import kassab_dataset
 
     kassab = kassab_dataset().sel(level="element")
     lines = ["", f"element length of orders {', '.join(map(str, orders))} (trunk at 11), |log10 model/Kassab|:"]

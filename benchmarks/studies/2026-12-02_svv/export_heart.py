@@ -24,7 +24,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 6000])
     ap.add_argument("--out", type=Path, default=Path("/tmp/svv_study"))
     args = ap.parse_args()
-    from vasc_pipeline.tissue import build_tissue
+    from vasc_pipeline.model.tissue import build_tissue
 
     args.out.mkdir(parents=True, exist_ok=True)
     for n in args.n:

@@ -128,7 +128,8 @@ def score_arrays(parent, position, k: int, nt: int, radius_own=None, problem=Non
 
     ``radius_own``: the method's own radii per node (svv's), scored separately from ours;
     ``problem``: the heart at N = ``nt`` (built when None)."""
-    from vasc_pipeline.tree import (
+    from vasc_pipeline import config, costs, engine, morphometry
+    from vasc_pipeline.model.tree import (
         KIND_BIFURCATION,
         KIND_INLET,
         KIND_TERMINAL,
@@ -136,8 +137,6 @@ def score_arrays(parent, position, k: int, nt: int, radius_own=None, problem=Non
         children_from_parent,
         count_terminals,
     )
-
-    from vasc_pipeline import config, costs, engine, morphometry
 
     if problem is None:
         problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={nt}"]))

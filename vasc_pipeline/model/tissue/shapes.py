@@ -193,7 +193,7 @@ def mask(
     (default: every nonzero label not named below), ``exclusion`` those large vessels must not
     cross although they need no supply (cavities), ``open`` those the exclusion map looks through
     (the space above a heart's base cut). ``inlets_path``: the inlets from a JSON or CSV file
-    (:func:`~vasc_pipeline.tissue.images.read_inlets`), instead of ``inlets``.
+    (:func:`~vasc_pipeline.model.tissue.images.read_inlets`), instead of ``inlets``.
     """
     if not path:
         raise TissueError("tissue.path is required for tissue=mask: a .npy file or a Zarr array")
