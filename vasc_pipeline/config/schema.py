@@ -389,5 +389,3 @@ def scheduled_steps(cfg: RunConfig) -> int:
 def packing_steps(cfg: RunConfig) -> int:
     """Proposals of the packing phase (the first of the run's steps): per terminal times N."""
     return int(round(cfg.anneal.packing_steps_per_terminal * cfg.n_terminals))
-
-
