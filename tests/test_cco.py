@@ -16,7 +16,6 @@ import pytest
 import xarray as xr
 
 from vasc_pipeline import cco, config, engine, job, store, sweep
-from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.config import ConfigError
 from vasc_pipeline.model.costs import full_costs, voxel_pieces
 from vasc_pipeline.model.geometry import optimal_bifurcations, vascular_cost, vascular_weights
@@ -25,6 +24,7 @@ from vasc_pipeline.model.rng import seed_state
 from vasc_pipeline.model.topology_search import best_topology
 from vasc_pipeline.model.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
 from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline.reduction import reduce_and_draw
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -361,7 +361,7 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     # Anneal runs of the same grid into the same directory, then one reduction over both.
     for j in sweep.expand(config.compose([*grid, "anneal.steps=20000", "anneal.trace_every=10000"])):
         job.run_job(j)
-    red = reduce_mod.reduce(out, stream=io.StringIO())
+    red = reduce_and_draw(out, stream=io.StringIO())
     assert red.cell_dims[0] == "method"
     costs = xr.open_zarr(out / "summary.zarr", group="costs")
     assert list(costs.method.values) == ["anneal", "cco"]

@@ -76,6 +76,15 @@ def test_no_import_circle():
             visit(name, [name])
 
 
+def test_the_reduction_imports_neither_the_pipeline_nor_the_figures():
+    """The arrows run down the data's path: the pipeline calls the reduction, then the figures."""
+    mods = modules()
+    for name, path in mods.items():
+        if name.startswith("vasc_pipeline.reduce"):
+            up = {m for m in imported_modules(name, path, set(mods)) if m.split(".")[1] in ("pipeline", "figures")}
+            assert not up, (name, sorted(up))
+
+
 def test_every_kernel_module_declares_its_names():
     for path in (PACKAGE / "kernel").glob("*.py"):
         if path.name != "__init__.py":

@@ -26,6 +26,7 @@ import xarray as xr
 from vasc_pipeline import config, job, morphometry, store, sweep
 from vasc_pipeline import reduce as reduce_mod
 from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline.reduction import reduce_and_draw
 from vasc_pipeline.reduce.reference import kassab_csv_path
 from vasc_pipeline.reduce.summary import write_summary
 
@@ -56,7 +57,7 @@ def swept(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep")
     jobs = run_all(out, *GRID)
     stream = io.StringIO()
-    result = reduce_mod.reduce(out, stream=stream)
+    result = reduce_and_draw(out, stream=stream)
     return out, jobs, result, stream.getvalue()
 
 
@@ -279,7 +280,7 @@ def test_exports_of_a_superseded_best_tree_are_removed(swept, tmp_path):
     # tree figure of the former best stay behind unless the next reduction removes them.
     out = tmp_path / "sweep"
     shutil.copytree(swept[0] / "runs", out / "runs")
-    first = reduce_mod.reduce(out, figures=False, stream=io.StringIO())
+    first = reduce_mod.reduce(out, stream=io.StringIO())
     best = {r.run_id for r in first.best.values()}
     former = sorted({p.name.removesuffix(".zarr") for p in (out / "runs").glob("*.zarr")} - best)[0]
     stale = [out / "trees" / f"{former}.vtp", out / "trees" / f"{former}.csv", out / "figures" / f"tree_{former}.png"]
@@ -289,7 +290,7 @@ def test_exports_of_a_superseded_best_tree_are_removed(swept, tmp_path):
     mine = out / "trees" / "notes.txt"
     mine.write_text("not named after a run")
     stream = io.StringIO()
-    second = reduce_mod.reduce(out, figures=False, stream=stream)
+    second = reduce_mod.reduce(out, stream=stream)
     assert sorted(second.removed) == sorted(stale) and not any(p.exists() for p in stale)
     assert mine.exists() and all((out / "trees" / f"{b}.vtp").exists() for b in best)
     assert "removed 3 exports and figures" in stream.getvalue()
@@ -306,7 +307,7 @@ def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_pa
         "anneal.trace_every=10000",
         "cluster.dashboard_address=null",
     )
-    result = reduce_mod.reduce(tmp_path, stream=io.StringIO())
+    result = reduce_and_draw(tmp_path, stream=io.StringIO())
     assert result.cell_dims == ["n_terminals", "m_b", "steps"]
     costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
     assert costs.sizes["steps"] == 2 and costs.sizes["seed"] == 2
@@ -351,12 +352,12 @@ def test_unfinished_stores_are_left_out_and_empty_dirs_refused(tmp_path):
         coords={**j.coords, "seed": 9},
         total_steps=20000,
     )
-    result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    result = reduce_mod.reduce(tmp_path, exports=False, stream=io.StringIO())
     assert list(result.skipped) == [str(running)] and "running" in result.skipped[str(running)]
     costs = xr.open_zarr(tmp_path / "summary.zarr", group="costs")
     assert costs.seed.values.tolist() == [0]
     # a second reduction replaces the summary in place
-    reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    reduce_mod.reduce(tmp_path, exports=False, stream=io.StringIO())
     # the swap leaves no copy behind, only its (hidden) lock file
     left = sorted(p.name for p in tmp_path.iterdir() if "summary.zarr" in p.name)
     assert left == [".summary.zarr.lock", "summary.zarr"]
@@ -456,7 +457,7 @@ def test_cavity_share_of_every_heart_run_is_in_the_costs_group(tmp_path, summary
         "sweep.seeds=[0,1]",
         "tissue=heart",
     )
-    result = reduce_mod.reduce(tmp_path, figures=False, exports=False, stream=io.StringIO())
+    result = reduce_mod.reduce(tmp_path, exports=False, stream=io.StringIO())
     shares = result.summary["costs"]["cavity_share"]
     for j in jobs:
         stored = store.RunStore.open(j.store, mode="r").attrs["statistics"]["cavity_share"]
@@ -536,7 +537,7 @@ def test_a_tissue_that_is_not_a_heart_is_reduced_without_the_kassab_comparison(t
     run_all(out, *ONE_RUN, "sweep.n_terminals=[16,24]", "tissue.organ=other")
     (out / "comparison.csv").write_text("left by an earlier reduction\n")  # not this configuration's: removed
     stream = io.StringIO()
-    result = reduce_mod.reduce(out, stream=stream)
+    result = reduce_and_draw(out, stream=stream)
     printed = stream.getvalue()
     assert not result.errors, result.errors
     assert "Kassab" in printed and "tissue.organ is other" in printed, printed  # one line saying why not
@@ -575,5 +576,5 @@ def test_a_mask_with_one_inlet_is_reduced_without_the_comparison(tmp_path):
     out = tmp_path / "mask"
     mask = ["tissue=mask", f"tissue.path={tmp_path / 'organ.npy'}", "tissue.voxel_size=0.001"]
     run_all(out, *ONE_RUN, "sweep.n_terminals=[16]", *mask, "tissue.inlets=[[0.0075,0.0075,0.015]]")
-    result = reduce_mod.reduce(out, stream=io.StringIO(), figures=False)
+    result = reduce_mod.reduce(out, stream=io.StringIO())
     assert result.comparison is None and not (out / "comparison.csv").exists()

@@ -263,7 +263,7 @@ def test_a_garbled_cost_attribute_is_a_damaged_store_for_the_sweep_and_the_reduc
     assert j.run_id in p.damaged and "holds no total cost" in p.damaged[j.run_id]
     assert not p.complete
     with pytest.raises(reduce.ReductionError, match=r"is damaged: its final cost attribute holds no total cost"):
-        reduce.reduce(out, figures=False, exports=False)
+        reduce.reduce(out, exports=False)
 
 
 def test_reduce_with_an_override_unlike_the_runs_is_refused(tmp_path):

@@ -88,7 +88,7 @@ def test_the_reduction_and_the_command_write_the_network(tmp_path):
     job.run_job(j)
     from vasc_pipeline.reduce import reduce
 
-    reduce(out, figures=False)
+    reduce(out)
     written = out / "trees" / f"{j.run_id}.0d.json"
     model = json.loads(written.read_text())
     assert len(model["vessels"]) == 2 * 16 - 1 and len(model["junctions"]) == 16 - 1

@@ -7,4 +7,4 @@ new runs), :mod:`~vasc_pipeline.pipeline.orchestrate` (``python -m vasc_pipeline
 (the live line), :mod:`~vasc_pipeline.pipeline.outdir` (lock, writability, Hydra callback).
 """
 
-__all__ = ["sweep", "job", "planning", "orchestrate", "cluster", "progress", "outdir", "extend"]
+__all__ = ["sweep", "job", "planning", "orchestrate", "cluster", "progress", "outdir", "extend", "reduction"]

@@ -6,7 +6,7 @@ and, optionally, a Dask client of their own). The path of a sweep:
 
 1. :func:`vasc_pipeline.pipeline.planning.plan`: expand the grid, build one problem per distinct N
    so that tissue and tree errors surface before anything runs. No writes.
-2. :func:`vasc_pipeline.pipeline.outdir.output_dir_lock`: one sweep per output_dir at a time (an
+2. :func:`vasc_pipeline.store.sweep_lock.output_dir_lock`: one sweep per output_dir at a time (an
    ``fcntl`` lock, released by the kernel even on SIGKILL). Existing stores are checked
    against the requested config (a changed config is refused, never mixed); stores of new
    runs are created here, before any job is dispatched (:mod:`vasc_pipeline.pipeline.planning`).
@@ -36,8 +36,9 @@ from typing import Any, TextIO
 
 from .. import config as _config
 from ..config.schema import ConfigError, RunConfig
-from ..store.layout import RUNS_DIR
+from ..store.layout import LOCK_NAME, RUNS_DIR
 from ..store.run_store import StoreError
+from ..store.sweep_lock import OutputDirLocked, check_output_dir, output_dir_lock
 from .cluster import (
     SweepStartError,
     check_cluster,
@@ -48,7 +49,7 @@ from .cluster import (
     slurm_job_script,
     wait_for_workers,
 )
-from .outdir import LOCK_NAME, OutputDirCallback, OutputDirLocked, check_output_dir, output_dir_lock
+from .outdir import OutputDirCallback
 from .planning import Plan, check_one_configuration, create_stores, inspect_stores, plan
 from .progress import PROGRESS_TOPIC, Progress, print_summary, runs_phrase
 from .sweep import Job
@@ -450,10 +451,10 @@ def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
 
 def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | None]:
     """Reduce a finished sweep; a failure is reported, never raised: the runs are already stored."""
-    from ..reduce import reduce
+    from .reduction import reduce_and_draw
 
     try:
-        return reduce(output_dir, stream=stream), None
+        return reduce_and_draw(output_dir, stream=stream), None
     except Exception as exc:
         error = f"{type(exc).__name__}: {exc}"
         stream.write(
@@ -466,7 +467,8 @@ def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | No
 
 def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
     """``+stage=reduce``: reduce the complete runs already in ``cfg.output_dir``; returns the exit status."""
-    from ..reduce import ReductionError, reduce  # the package attribute: what callers (and tests) replace
+    from ..reduce import ReductionError
+    from .reduction import reduce_and_draw
 
     stream = stream or sys.stderr
     try:  # the same checks as a run: a typo'd value is reported, not silently ignored
@@ -490,7 +492,7 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
         )
         return 2
     try:
-        reduction = reduce(output_dir, stream=stream)
+        reduction = reduce_and_draw(output_dir, stream=stream)
     except (ReductionError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2

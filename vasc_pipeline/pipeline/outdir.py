@@ -1,130 +1,22 @@
-"""The output_dir of a sweep: the writability check, the one-sweep-at-a-time lock, the Hydra callback.
+"""The output_dir of a command line run: the Hydra callback that checks it before Hydra writes its
+logs there, and the clean-up of a run refused as bad input.
 
-:func:`output_dir_lock` holds ``<output_dir>/.vasc_pipeline.lock`` (an ``fcntl`` lock through
-:func:`vasc_pipeline.store.file_lock`, released by the kernel even on SIGKILL) while
-:func:`vasc_pipeline.pipeline.orchestrate.run_sweep` runs; :func:`check_output_dir` creates the
-directory and proves it writable; :class:`OutputDirCallback` runs that check before Hydra
-writes its logs there. All three are re-exported by :mod:`vasc_pipeline.pipeline.orchestrate`.
+The writability check and the one-sweep-at-a-time lock live with the store
+(:mod:`vasc_pipeline.store.sweep_lock`), where the reduction reads the lock too.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
-import socket
 import sys
-import time
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-from ..store.layout import LOCK_NAME, RUNS_DIR
-from ..store.run_store import file_lock
+from ..store.layout import RUNS_DIR
+from ..store.sweep_lock import check_output_dir
 
-__all__ = [
-    "LOCK_NAME",
-    "OutputDirLocked",
-    "output_dir_lock",
-    "check_output_dir",
-    "sweep_in_progress",
-    "OutputDirCallback",
-    "forget_refused_run",
-]
-
-
-class OutputDirLocked(OSError):
-    """Another sweep holds the output_dir."""
-
-
-# --------------------------------------------------------------------------------------------
-# The output_dir lock
-
-
-@contextlib.contextmanager
-def output_dir_lock(output_dir: str | os.PathLike) -> Iterator[Path]:
-    """Hold ``<output_dir>/.vasc_pipeline.lock`` for the duration of a sweep.
-
-    Raises :class:`OutputDirLocked` (an OSError) if another sweep holds it, and OSError
-    naming ``output_dir`` if the directory cannot be created or written.
-    """
-    out = check_output_dir(output_dir)
-    with contextlib.ExitStack() as stack:
-        try:
-            (out / RUNS_DIR).mkdir(exist_ok=True)
-            fh = stack.enter_context(file_lock(out / LOCK_NAME, wait=False))
-        except BlockingIOError:
-            try:
-                holder = json.loads((out / LOCK_NAME).read_text() or "{}")
-            except (OSError, ValueError):
-                holder = {}
-            raise OutputDirLocked(
-                f"output_dir {str(out)!r} is in use by another sweep (pid {holder.get('pid', '?')} on "
-                f"{holder.get('host', '?')}, started {holder.get('started', '?')}). Two sweeps never write "
-                "into one output_dir at once: wait for that one to finish (or stop it; rerunning the same "
-                "command resumes it), or choose another output_dir=..."
-            ) from None
-        except OSError as exc:
-            raise OSError(
-                f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-                "writable directory with output_dir=..."
-            ) from exc
-        fh.seek(0)
-        fh.truncate()
-        fh.write(
-            json.dumps(
-                {
-                    "pid": os.getpid(),
-                    "host": socket.gethostname(),
-                    "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                    "argv": sys.argv,
-                }
-            )
-        )
-        fh.flush()
-        yield out
-
-
-def sweep_in_progress(output_dir: str | os.PathLike) -> str | None:
-    """Who holds ``output_dir``'s sweep lock (``"pid N on HOST, started T"``), or None when no sweep does.
-
-    Read-only for a directory without a lock file (none is created); the lock is tried, never waited for.
-    """
-    path = Path(output_dir) / LOCK_NAME
-    if not path.is_file():
-        return None
-    try:
-        with file_lock(path, wait=False):
-            return None
-    except BlockingIOError:
-        pass
-    except OSError:  # unreadable lock file: nothing known about a sweep
-        return None
-    try:
-        holder = json.loads(path.read_text() or "{}")
-    except (OSError, ValueError):
-        holder = {}
-    return f"pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started {holder.get('started', '?')}"
-
-
-def check_output_dir(output_dir: str | os.PathLike) -> Path:
-    """Create ``output_dir`` if needed and prove it writable; OSError naming the field otherwise."""
-    out = Path(output_dir)
-    if out.exists() and not out.is_dir():
-        raise OSError(
-            f"output_dir: {str(out)!r} is a file, not a directory; choose a directory for the results with "
-            "output_dir=..."
-        )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".write-test-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise OSError(
-            f"output_dir: cannot create or write {str(out)!r} ({exc.strerror or exc}); choose a "
-            "writable directory with output_dir=..."
-        ) from exc
-    return out
+__all__ = ["OutputDirCallback", "forget_refused_run"]
 
 
 # What existed of output_dir before Hydra made its run directory (OutputDirCallback fills it):

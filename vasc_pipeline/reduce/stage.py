@@ -1,4 +1,4 @@
-"""The reduction stage: finished run stores -> ``summary.zarr``, comparison tables, tree exports, figures.
+"""The reduction stage: finished run stores -> ``summary.zarr``, comparison tables, tree exports.
 
 A plain function of an output directory (no Hydra, no Dask)::
 
@@ -13,8 +13,9 @@ is the cell's tree (:mod:`vasc_pipeline.reduce.runs`); its morphometry
 compared with Kassab et al. 1993 when the tissue is a heart (``tissue.organ``; the comparison's
 table, CSVs, summary groups and figure panels are left out otherwise). The summary's schema is
 :mod:`vasc_pipeline.reduce.summary`'s; this module writes it, derives the tables (``comparison.csv``,
-``comparison_summary.csv``, ``anatomy.csv`` and the printed tables) from it, and calls the exports and
-figures.
+``comparison_summary.csv``, ``anatomy.csv`` and the printed tables) from it, and writes the exports.
+The figures are drawn from the summary by :mod:`vasc_pipeline.figures`; the pipeline calls the two in
+order (:func:`vasc_pipeline.pipeline.reduction.reduce_and_draw`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from ..pipeline.outdir import sweep_in_progress
 from ..store.layout import (
     ANATOMY_CSV,
     COMPARISON_CSV,
@@ -41,6 +41,7 @@ from ..store.layout import (
     TREES_DIR,
     run_store_paths,
 )
+from ..store.sweep_lock import sweep_in_progress
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, MMHG
 from .reference import ARTERIES
@@ -84,7 +85,7 @@ class Reduction:
     comparison_summary_csv: Path | None
     anatomy_csv: Path
     trees: list[Path] = field(default_factory=list)
-    figures: list[Path] = field(default_factory=list)
+    figures: list[Path] = field(default_factory=list)  # drawn by the pipeline (reduce_and_draw)
     removed: list[Path] = field(default_factory=list)  # superseded tree exports and figures
     skipped: dict[str, str] = field(default_factory=dict)  # store -> why it was not used
     damaged: dict[str, str] = field(default_factory=dict)  # the skipped stores that fail their checks
@@ -287,17 +288,13 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
     return removed
 
 
-def reduce(
-    output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True, stream: TextIO | None = None
-) -> Reduction:
-    """Reduce every complete run of ``output_dir``: summary, comparison, tree exports, figures.
+def reduce(output_dir: str | os.PathLike, *, exports: bool = True, stream: TextIO | None = None) -> Reduction:
+    """Reduce every complete run of ``output_dir``: summary, comparison, anatomy, tree exports.
 
     Parameters
     ----------
     output_dir : path
         A sweep's output directory (``runs/<run_id>.zarr`` inside).
-    figures : bool
-        Write the PNG figures into ``<output_dir>/figures/``.
     exports : bool
         Write ``<output_dir>/trees/<run_id>.vtp``, ``.csv`` and ``.0d.json`` (svZeroDSolver's
         input, :mod:`vasc_pipeline.reduce.zerod`) for the best tree of every cell.
@@ -311,9 +308,9 @@ def reduce(
     Raises
     ------
     ReductionError
-        If ``output_dir`` holds no complete run. A failure while drawing figures or
-        exporting trees is reported in ``Reduction.errors`` (and printed) instead: the
-        summary and tables are written first and stay valid.
+        If ``output_dir`` holds no complete run. A failure while exporting trees is reported
+        in ``Reduction.errors`` (and printed) instead: the summary and tables are written first
+        and stay valid.
     """
     stream = stream or sys.stdout
     out = Path(output_dir)
@@ -367,13 +364,6 @@ def reduce(
                     result.zero_d_check[r.run_id] = deviation
         except Exception as exc:  # an export problem must not hide the summary already written
             result.errors["exports"] = f"{type(exc).__name__}: {exc}"
-    if figures:
-        try:
-            from ..figures import make_figures
-
-            result.figures = make_figures(summary, out)
-        except Exception as exc:
-            result.errors["figures"] = f"{type(exc).__name__}: {exc}"
     lines = [
         f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
         f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
@@ -391,8 +381,6 @@ def reduce(
             f"  0D check: svZeroDSolver on the exported networks gives the inlet pressure to {worst:.1e} (relative): "
             "the terminal pressures above are the networks' own"
         )
-    if result.figures:
-        lines.append(f"  figures: {out / 'figures'} ({len(result.figures)} PNG)")
     if result.removed:
         lines.append(f"  removed {len(result.removed)} exports and figures of trees no longer their cell's best")
     for path, why in skipped.items():
