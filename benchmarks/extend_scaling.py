@@ -1,7 +1,8 @@
 """The whole tree below an annealed run (``+stage=extend``): wall time, peak memory and the exponent in n.
 
 For each fine count n below a committed annealed tree (default the best N = 6000 heart of the
-size scan, ``results/studies/size_scan/runs/heart-N6000-mb641.3-s1.zarr``), one extension in a
+size scan, ``results/studies/size_scan/runs/heart-N6000-mb641.3-s1.zarr``, restored from the history
+as results/README.md says), one extension in a
 fresh process (:func:`vasc_pipeline.pipeline.extend.extend_run`, serial, or on a LocalCluster of
 ``--workers``) into a temporary directory: wall time (planning, growth, finishing), the peak
 resident memory of that process and its workers (sampled every 0.2 s), the whole tree's
@@ -14,7 +15,7 @@ too large to run here; no store, no memory figure).
 
     python benchmarks/extend_scaling.py --sizes 12000 24000 48000 96000
     python benchmarks/extend_scaling.py --sizes 1e5 2e5 5e5 1e6 --sample 60
-    python benchmarks/extend_scaling.py --quick        # the N = 500 heart, n = 1000 and 2000
+    python benchmarks/extend_scaling.py --quick        # a small heart annealed here, n = 1000 and 2000
 
 Prints one JSON line per size (and one for the fit), then a table.
 """
@@ -35,7 +36,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 RUNS = REPO / "results" / "studies" / "size_scan" / "runs"
 SOURCE = RUNS / "heart-N6000-mb641.3-s1.zarr"
-QUICK_SOURCE = RUNS / "heart-N500-mb641.3-s1.zarr"
+
+
+def quick_source(where: Path) -> str:
+    """A small annealed heart (N = 100, a short anneal) grown into ``where``: --quick's source, so
+    the wiring is exercised on a clone that holds no study's stores."""
+    from vasc_pipeline import config, job, sweep
+
+    (j,) = sweep.expand(config.compose(["n_terminals=100", "anneal.steps=100000", f"output_dir={where}"]))
+    job.run_job(j)
+    return j.store
 
 
 def tree_rss(pid: int) -> int:
@@ -166,7 +176,8 @@ def main(argv=None) -> int:
         source, n, out, workers, batch = args.child
         child(source, int(n), out, int(workers), int(batch))
         return 0
-    source = str(args.source or (QUICK_SOURCE if args.quick else SOURCE))
+    scratch = Path(tempfile.mkdtemp(prefix="extend_scaling_source_")) if args.quick and not args.source else None
+    source = str(args.source or (quick_source(scratch) if scratch else SOURCE))
     sizes = [1000, 2000] if args.quick else [int(s) for s in args.sizes]
     if args.sample:
         rows = sampled(source, sizes, 4 if args.quick else args.sample)
@@ -187,6 +198,8 @@ def main(argv=None) -> int:
         finally:
             if not args.out:
                 shutil.rmtree(out, ignore_errors=True)
+    if scratch:
+        shutil.rmtree(scratch, ignore_errors=True)
     summary = fit(rows)
     print(json.dumps(summary))
     if args.sample:

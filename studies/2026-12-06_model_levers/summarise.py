@@ -26,7 +26,9 @@ from vasc_pipeline.reduce.fidelity import run_row
 from vasc_pipeline.reduce.reference import ARTERIES
 
 HERE = Path(__file__).resolve().parent
-BASELINE = Path("results/studies/size_scan/runs")  # the paper's model, today's `fast`, seeds 0-3
+# the paper's model under today's `fast`, seeds 0-3 (off main's tree: results/README.md says how to
+# restore them; their rows are in scored.jsonl already)
+BASELINE = Path("results/studies/size_scan/runs")
 
 
 def stores(out: Path, baseline: Path) -> list[tuple[str, Path]]:
