@@ -68,11 +68,12 @@ def _running_equals(problem, model, state):
     np.testing.assert_array_equal(state.seg_exclusion, fresh.seg_exclusion)
 
 
-def test_fast_sums_its_first_40_percent_on_a_twice_coarser_map_and_the_other_schedules_never():
+def test_fast_sums_its_coarse_phase_on_a_coarser_map_and_the_other_schedules_never():
     steps = ("tissue=heart", "n_terminals=120", "anneal.steps=1000000")
     fast = make_problem(*steps, "anneal=fast")
-    assert fast.coarse_steps == 400_000
-    assert fast.coarse_model.depth_voxel_size == 2 * fast.model.depth_voxel_size
+    a = fast.config.anneal  # the preset's own phase and factor, whatever values it moves to
+    assert fast.coarse_steps == round(a.coarse_exclusion_phase * 1_000_000)
+    assert fast.coarse_model.depth_voxel_size == a.coarse_exclusion_factor * fast.model.depth_voxel_size
     for schedule in ("fast_v1", "paper"):
         other = make_problem(*steps, f"anneal={schedule}")
         assert other.coarse_model is None and other.coarse_steps == 0
