@@ -228,7 +228,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     for j in jobs_for(out, schedule, budget, n, args.seeds, steps, args.override, args.label)
                 ]
     todo = [w for w in wanted if w[0].store not in done]
-    todo.sort(key=lambda w: -w[0].config["anneal"]["steps"])  # longest first: the pool finishes together
+    # longest first: the pool finishes together (a CCO run's config has no anneal section: N additions)
+    todo.sort(key=lambda w: -w[0].config.get("anneal", {}).get("steps", w[0].coords["n_terminals"]))
     by_store = {w[0].store: w for w in todo}
     if args.parts > 1:
         finished = (run_in_parts(w[0], args.workers) for w in todo)

@@ -14,6 +14,8 @@
 #   A_cut08    A with the intramural cutoff at 0.8 mm diameter
 #   A_band     A with the split held in a band, 0.62 +- 0.15 of the terminals to the LCA
 #              (tissue.inlet_share_tolerance=0.15, nearest start): the trees trade subtrees inside it
+#   cco        our CCO growth (method=cco) under the paper's physics, and cco_phys under the
+#              physiological model's (gamma 7/3, cutoff 0.4 mm): the constructive baseline
 #
 # Resumable: every run is a checkpointed pipeline job; rerun the same command to continue.
 # Rows of finished runs land in OUT/rows.jsonl and are merged into rows.jsonl beside this
@@ -30,7 +32,7 @@ here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../.."
 OUT=${1:-results/studies/model_levers}
 LEVERS=("${@:2}")
-[ ${#LEVERS[@]} -gt 0 ] || LEVERS=(A A_share A_cco A_near g73 reach0 cut04 A_cut02 A_cut08 A_band)
+[ ${#LEVERS[@]} -gt 0 ] || LEVERS=(A A_share A_cco A_near g73 reach0 cut04 A_cut02 A_cut08 A_band cco cco_phys)
 REACH0=(--override tissue.bifurcation_reach=0)
 G73=(--override physics.gamma=2.3333333333333335)
 SHARE=(--override "tissue.inlet_share=[0.62,0.38]" --override tissue.inlet_assignment=nearest)
@@ -46,8 +48,10 @@ for lever in "${LEVERS[@]}"; do
     A_cco) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) --override anneal.init=cco) ;;
     A_cut02) o=("${REACH0[@]}" "${G73[@]}" $(cut 1e-4)) ;;
     A_cut08) o=("${REACH0[@]}" "${G73[@]}" $(cut 4e-4)) ;;
+    cco) o=(--override method=cco) ;;
+    cco_phys) o=(--override method=cco "${G73[@]}" $(cut 2e-4)) ;;
     A_band) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) "${SHARE[@]}" --override tissue.inlet_share_tolerance=0.15) ;;
-    *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band, got '$lever'" >&2; exit 2 ;;
+    *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band cco cco_phys, got '$lever'" >&2; exit 2 ;;
   esac
   python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
     --label "$lever" "${o[@]}"
