@@ -36,7 +36,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-from .run_store import STATUS_COMPLETE, STATUS_RUNNING, StoreError, _jsonable, file_lock
+from .run_store import STATUS_COMPLETE, STATUS_RUNNING, GroupStore, StoreError, _jsonable, file_lock
 
 __all__ = ["ExtendedStore", "EXTENDED_FORMAT", "TREE_CHUNK", "extended_lock", "identity_hash"]
 
@@ -78,12 +78,8 @@ def extended_lock(path: str | os.PathLike, wait: bool = False) -> Iterator[None]
         yield
 
 
-class ExtendedStore:
+class ExtendedStore(GroupStore):
     """The whole tree of one run. Create with :meth:`create`, reopen with :meth:`open`."""
-
-    def __init__(self, path: Path, group: zarr.Group) -> None:
-        self.path = Path(path)
-        self.group = group
 
     @classmethod
     def create(
@@ -165,18 +161,6 @@ class ExtendedStore:
         if group.attrs.get("format") != EXTENDED_FORMAT:
             raise StoreError(f"{str(path)!r} is not an extended store (format {group.attrs.get('format')!r})")
         return cls(path, group)
-
-    @staticmethod
-    def exists(path: str | os.PathLike) -> bool:
-        return (Path(path) / "zarr.json").is_file()
-
-    @property
-    def attrs(self) -> dict[str, Any]:
-        return dict(self.group.attrs)
-
-    @property
-    def status(self) -> str:
-        return self.group.attrs["status"]
 
     @property
     def nodes_committed(self) -> int:

@@ -191,16 +191,33 @@ def _write_whole_array(group: zarr.Group, name: str, data: np.ndarray, dtype, di
     arr[...] = data
 
 
-class RunStore(CheckpointsMixin):
+class GroupStore:
+    """What every store of ours shares: its path, its root Zarr group, whether one exists at a
+    path, its attributes and its status (:class:`RunStore`, the whole tree's ExtendedStore)."""
+
+    def __init__(self, path: Path, group: zarr.Group) -> None:
+        self.path = Path(path)
+        self.group = group
+
+    @staticmethod
+    def exists(path: str | os.PathLike) -> bool:
+        return (Path(path) / "zarr.json").is_file()
+
+    @property
+    def attrs(self) -> dict[str, Any]:
+        return dict(self.group.attrs)
+
+    @property
+    def status(self) -> str:
+        return self.group.attrs["status"]
+
+
+class RunStore(GroupStore, CheckpointsMixin):
     """One run's Zarr store. Create with :meth:`create`, reopen with :meth:`open`.
 
     The checkpoint methods (:meth:`write_checkpoint`, :meth:`load_checkpoint`,
     :meth:`record_resume`) are :class:`vasc_pipeline.store.checkpoints.CheckpointsMixin`'s.
     """
-
-    def __init__(self, path: Path, group: zarr.Group) -> None:
-        self.path = Path(path)
-        self.group = group
 
     # -- creation and opening ---------------------------------------------------------------
 
@@ -260,19 +277,7 @@ class RunStore(CheckpointsMixin):
             raise StoreError(f"{str(path)!r} is not a vasc_pipeline run store (attrs format={attrs.get('format')!r})")
         return cls(path, group)
 
-    @staticmethod
-    def exists(path: str | os.PathLike) -> bool:
-        return (Path(path) / "zarr.json").is_file()
-
     # -- attributes -------------------------------------------------------------------------
-
-    @property
-    def attrs(self) -> dict[str, Any]:
-        return dict(self.group.attrs)
-
-    @property
-    def status(self) -> str:
-        return self.group.attrs["status"]
 
     @property
     def run_id(self) -> str:
