@@ -13,10 +13,10 @@ import math
 
 import numpy as np
 
-from .physics import Physics, cost_tables
+from .physics import TABLE_FLOW, TABLE_RESISTANCE, Physics, cost_tables, segment_factors
 from .tissue import ExclusionGrid, Tissue
+from .topology import KIND_BIFURCATION, KIND_INLET, KIND_TERMINAL, path_sums, terminals_downstream
 from .topology import segment_lengths as _segment_lengths
-from .topology import topological_order
 from .tree import Tree
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "supply_counts",
     "supply_cost",
     "node_pressures",
+    "tree_pressures",
     "full_costs",
     "total_cost",
     "vascular_cost",
@@ -184,11 +185,21 @@ def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = No
     lengths = segment_lengths(tree) if lengths is None else lengths
     n = tree.n_downstream
     drop = tables.flow[n] * tables.resistance[n] * lengths
-    pressure = np.zeros(tree.n_nodes)
-    pressure[: tree.n_inlets] = physics.pressure_inlet
-    for node in topological_order(tree.parent)[tree.n_inlets :].tolist():  # parents first
-        pressure[node] = pressure[tree.parent[node]] - drop[node]
-    return pressure
+    return path_sums(tree.parent, -drop, physics.pressure_inlet)
+
+
+def tree_pressures(parent: np.ndarray, position: np.ndarray, physics: Physics) -> np.ndarray:
+    """Pressure [Pa] at every node of a tree in any node layout (a run store's, an extended
+    store's with its pass-through nodes), from the Poiseuille drops along the paths from the
+    inlets at ``physics.pressure_inlet``: every node without children is a terminal, flows and
+    radii follow from the terminals downstream under ``physics`` (:func:`node_pressures`, for
+    arrays; the same values on a run's tree)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    childless = np.bincount(parent[parent >= 0], minlength=parent.size) == 0
+    kind = np.where(parent < 0, KIND_INLET, np.where(childless, KIND_TERMINAL, KIND_BIFURCATION))
+    factors = segment_factors(physics, terminals_downstream(parent, kind))
+    drop = factors[TABLE_FLOW] * factors[TABLE_RESISTANCE] * _segment_lengths(parent, position)
+    return path_sums(parent, -drop, physics.pressure_inlet)
 
 
 def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms | None = None) -> dict[str, float]:
