@@ -149,15 +149,20 @@ def path_sums(parent, weight, start=0.0) -> np.ndarray:
     """
     parent = _parent_array(parent)
     weight = np.asarray(weight, dtype=float)
-    depth = node_depth(parent)
-    order = np.argsort(depth, kind="stable")
-    bounds = np.searchsorted(depth[order], np.arange(1, int(depth.max(initial=0)) + 2))
     out = np.zeros(parent.size)
     out[parent < 0] = np.broadcast_to(np.asarray(start, dtype=float), parent.shape)[parent < 0]
-    for lo, hi in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
-        level = order[lo:hi]
+    for level in _levels(parent):
         out[level] = out[parent[level]] + weight[level]
     return out
+
+
+def _levels(parent: np.ndarray) -> list[np.ndarray]:
+    """The non-inlet nodes by depth (1, 2, ...), each level in increasing node order: a pass over
+    a tree from its inlets (or toward them, reversed) in as many NumPy steps as it is deep."""
+    depth = node_depth(parent)
+    order = np.argsort(depth, kind="stable")
+    bounds = np.searchsorted(depth[order], np.arange(1, int(depth.max(initial=0)) + 2)).tolist()
+    return [order[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 
 # The numpydoc blocks here repeat one another (parent, the shapes returned) on purpose: each
@@ -385,9 +390,6 @@ def terminals_downstream(parent, kind) -> np.ndarray:
     """
     parent = _parent_array(parent)
     count = (np.asarray(kind) == KIND_TERMINAL).astype(np.int64)
-    # Deepest nodes first: each node adds its (finished) count to its parent's.
-    for v in reversed(topological_order(parent).tolist()):
-        p = parent[v]
-        if p >= 0:
-            count[p] += count[v]
+    for level in reversed(_levels(parent)):  # deepest first: each node adds its (finished) count to its parent's
+        np.add.at(count, parent[level], count[level])
     return count
