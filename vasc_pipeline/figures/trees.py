@@ -57,14 +57,22 @@ def tree_views(tree: dict) -> tuple[tuple[str, str], ...]:
     return _VIEWS_3D[:1] if tree["mask"].shape[0] == 1 else _VIEWS_3D
 
 
-def draw_tree(ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: float = 3.5) -> None:
-    """One projection of ``tree`` (from :func:`load_tree`) on ``ax``: tissue outline, vessels, inlets."""
+def draw_tree(
+    ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: float = 3.5, segments: np.ndarray | None = None
+) -> None:
+    """One projection of ``tree`` (from :func:`load_tree`) on ``ax``: tissue outline, vessels, inlets.
+
+    ``segments``: the segments drawn (their child nodes; default all), a subsample of a tree too
+    large to draw whole; the line widths still scale with the widest of all.
+    """
     a, b = view
     parent, pos, radius = tree["parent"], tree["position_mm"], tree["radius"]
     h, origin = tree["voxel_size"], tree["origin"]
-    seg = np.flatnonzero(parent >= 0)
-    proj = tree["mask"].any(axis=_MASK_AXIS[view])  # rows, cols: x-y -> (y, x); x-z -> (z, x); y-z -> (z, y)
+    every = np.flatnonzero(parent >= 0)
+    seg = every if segments is None else np.asarray(segments)
     col_axis, row_axis = _AXIS[a], _AXIS[b]
+    proj = np.zeros((0, 0), bool) if tree["mask"] is None else tree["mask"].any(axis=_MASK_AXIS[view])
+    # rows, cols: x-y -> (y, x); x-z -> (z, x); y-z -> (z, y)
     cols = (origin[col_axis] + h * np.arange(proj.shape[1])) * MM
     rows = (origin[row_axis] + h * np.arange(proj.shape[0])) * MM
     if proj.any() and not proj.all() and min(proj.shape) > 1:
@@ -88,7 +96,7 @@ def draw_tree(ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: flo
     ax.add_collection(
         LineCollection(
             lines,
-            linewidths=0.25 + width_max * radius[s] / float(radius[seg].max()),
+            linewidths=0.25 + width_max * radius[s] / float(radius[every].max()),
             colors=[_COLORS(int(i) % 10) for i in inlet_index],
             capstyle="round",
         )

@@ -490,7 +490,7 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
         )
         return 2
     try:
-        reduction = reduce(output_dir, stream=stream)
+        reduction = reduce(output_dir, stream=stream, extended_zerod=cfg.extend.zerod)
     except (ReductionError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2

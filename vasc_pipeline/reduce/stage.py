@@ -43,6 +43,7 @@ from ..store.layout import (
 )
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, MMHG
+from .extended import ExtendedReduction, extended_stores, reduce_extended
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .summary import COMPARISON_LEVEL, COMPARISON_SCHEME, build_summary, write_summary
@@ -91,6 +92,8 @@ class Reduction:
     errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
     # run id -> svZeroDSolver's largest relative inlet-pressure deviation on the exported network
     zero_d_check: dict[str, float] = field(default_factory=dict)
+    # the whole trees of extended/ (vasc_pipeline.reduce.extended), None without a complete one
+    extended: ExtendedReduction | None = None
 
 
 def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
@@ -288,9 +291,16 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
 
 
 def reduce(
-    output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True, stream: TextIO | None = None
+    output_dir: str | os.PathLike,
+    *,
+    figures: bool = True,
+    exports: bool = True,
+    stream: TextIO | None = None,
+    extended_zerod: str = "lumped",
 ) -> Reduction:
-    """Reduce every complete run of ``output_dir``: summary, comparison, tree exports, figures.
+    """Reduce every complete run of ``output_dir``: summary, comparison, tree exports, figures;
+    then the whole trees of ``extended/``, when it holds a complete one
+    (:func:`vasc_pipeline.reduce.extended.reduce_extended`, with ``extended_zerod`` its 0D network).
 
     Parameters
     ----------
@@ -406,4 +416,13 @@ def reduce(
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")
     stream.flush()
+    if extended_stores(out)[0]:
+        try:
+            result.extended = reduce_extended(
+                out, zerod=extended_zerod, figures=figures, exports=exports, stream=stream
+            )
+            result.errors.update({f"extended {k}": v for k, v in result.extended.errors.items()})
+        except Exception as exc:  # the runs' summary is written and valid: report, go on
+            result.errors["extended"] = f"{type(exc).__name__}: {exc}"
+            stream.write(f"  the whole trees' reduction FAILED: {result.errors['extended']}\n")
     return result
