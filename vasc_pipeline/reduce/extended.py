@@ -70,6 +70,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from ..config.schema import EXTEND_ZERODS as ZERODS
 from ..model.costs import Poiseuille, poiseuille
 from ..model.physics import Physics
 from ..model.topology import (
@@ -113,7 +114,6 @@ __all__ = [
     "TERRITORY_META",
 ]
 
-ZERODS = ("lumped", "full")  # extend.zerod
 # Published pressures in coronary arterioles as a fraction of aortic pressure (module docstring:
 # the source lines, and where the numbers are from).
 PUBLISHED_PRESSURES = {

@@ -35,6 +35,7 @@ from ..store.layout import (
     ANATOMY_CSV,
     COMPARISON_CSV,
     COMPARISON_SUMMARY_CSV,
+    EXTENDED_DIR,
     FIGURES_DIR,
     RUNS_DIR,
     SUMMARY_NAME,
@@ -43,7 +44,7 @@ from ..store.layout import (
 )
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, MMHG
-from .extended import ExtendedReduction, extended_stores, reduce_extended
+from .extended import ExtendedReduction, reduce_extended
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .summary import COMPARISON_LEVEL, COMPARISON_SCHEME, build_summary, write_summary
@@ -92,7 +93,7 @@ class Reduction:
     errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
     # run id -> svZeroDSolver's largest relative inlet-pressure deviation on the exported network
     zero_d_check: dict[str, float] = field(default_factory=dict)
-    # the whole trees of extended/ (vasc_pipeline.reduce.extended), None without a complete one
+    # the whole trees of extended/ (vasc_pipeline.reduce.extended); None without extended/
     extended: ExtendedReduction | None = None
 
 
@@ -299,7 +300,7 @@ def reduce(
     extended_zerod: str = "lumped",
 ) -> Reduction:
     """Reduce every complete run of ``output_dir``: summary, comparison, tree exports, figures;
-    then the whole trees of ``extended/``, when it holds a complete one
+    then, when there is an ``extended/``, its complete whole trees
     (:func:`vasc_pipeline.reduce.extended.reduce_extended`, with ``extended_zerod`` its 0D network).
 
     Parameters
@@ -416,7 +417,7 @@ def reduce(
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")
     stream.flush()
-    if extended_stores(out)[0]:
+    if (out / EXTENDED_DIR).is_dir():  # the whole trees: reduce_extended says which it leaves out
         try:
             result.extended = reduce_extended(
                 out, zerod=extended_zerod, figures=figures, exports=exports, stream=stream
