@@ -93,6 +93,7 @@ def reduce_it(out: str, zerod: str) -> None:
         "peak_rss_mb": peak[0] / 2**20,
         "errors": result.errors,
         "zero_d_check": result.zero_d_check.get(run_id),
+        "zero_d_solver": result.zero_d_solver.get(run_id),
         "files_mb": {p.name[len(run_id) + 1 :]: p.stat().st_size / 2**20 for p in result.trees},
         "anatomy": {k: float(v) for k, v in anatomy.data_vars.items() if v.ndim == 0},
         "mean_abs_log10": None

@@ -9,6 +9,7 @@ below each) made once in this module.
 from __future__ import annotations
 
 import io
+import json
 import shutil
 import xml.etree.ElementTree as ET
 
@@ -24,6 +25,7 @@ from vasc_pipeline.model.physics import Physics
 from vasc_pipeline.model.topology import KIND_TERRITORY_ROOT, check_tree_arrays, terminals_downstream
 from vasc_pipeline.model.tree import tree_from_arrays
 from vasc_pipeline.pipeline.extend import extend_run
+from vasc_pipeline.reduce import extended as extended_module
 from vasc_pipeline.reduce import reduce, zerod
 from vasc_pipeline.reduce.anatomy import crown_exponents, terminal_pressures
 from vasc_pipeline.reduce.extended import (
@@ -297,8 +299,8 @@ def test_outputs_of_the_whole_trees_reduction(whole):
     for p in ext.figures:
         png_is_a_real_figure(p, min_shape=(300, 400))
     assert sorted(p.name for p in ext.trees) == sorted(f"{j.run_id}.extended.{x}" for x in ("vtp", "csv", "0d.json"))
-    if ext.zero_d_check:  # svZeroDSolver installed: the lumped network reproduces the inlet pressure
-        assert ext.zero_d_check[j.run_id] < 1e-9
+    assert ext.zero_d_check[j.run_id] < 1e-9  # the written network gives the inlets the model's pressure
+    assert ext.zero_d_solver[j.run_id] in ("svZeroDSolver", "steady_solution (NumPy)")
     assert f"reduced 1 whole tree of {out / 'extended'}" in printed
 
 
@@ -333,3 +335,17 @@ def test_the_whole_trees_reduction_refuses_an_unknown_network_and_skips_unfinish
     ext = reduce_extended(partial, stream=io.StringIO())
     assert ext.summary is None and str(path) in ext.skipped and "resumes it" in ext.skipped[str(path)]
     assert not (partial / "extended_summary.zarr").exists()
+
+
+def test_a_network_too_large_for_svzerod_is_checked_by_the_sparse_solution(whole, tmp_path, monkeypatch):
+    out, j, _, _ = whole
+    copy = tmp_path / "copy"
+    shutil.copytree(out / "runs", copy / "runs")
+    shutil.copytree(out / "extended", copy / "extended")
+    monkeypatch.setattr(extended_module, "SVZEROD_MAX_VESSELS", 10)
+    stream = io.StringIO()
+    ext = reduce_extended(copy, zerod="full", figures=False, stream=stream)
+    assert ext.zero_d_solver == {j.run_id: "steady_solution (NumPy)"} and ext.zero_d_check[j.run_id] < 1e-9
+    model = json.loads((copy / "trees" / f"{j.run_id}.extended.0d.json").read_text())
+    assert len(model["vessels"]) == 2 * 40 + 40 * (2 * 10 - 1) - 2  # every segment: the full network
+    assert "0D check: steady_solution (NumPy)" in stream.getvalue()
