@@ -18,8 +18,8 @@ import numpy as np
 import xarray as xr
 
 from .orders import WHAT, kassab_points, model_points
-from .style import MM, TREE_DPI, order_axis, save, styled, subplots
-from .trees import draw_tree, tree_legend, tree_views
+from .style import MM, order_axis, save, styled, subplots
+from .trees import draw_projections
 
 __all__ = ["plot_whole_tree", "plot_extended_morphometry", "plot_extended_pressure"]
 
@@ -63,25 +63,16 @@ def plot_whole_tree(tree, path, max_fine: int = 40_000, seed: int = 0) -> Path:
         "origin": origin,
     }
     segments = _drawn_segments(tree, max_fine, seed)
-    views = tree_views(drawn) if mask is not None else (("x", "y"), ("x", "z"), ("y", "z"))
-    fig, axes = subplots(1, len(views), figsize=(3.4 * len(views) + 0.6, 3.6), squeeze=False)
-    for ax, view in zip(axes[0], views):
-        draw_tree(ax, drawn, view, width_max=3.0, segments=segments)
-        ax.set_xlabel(f"{view[0]} [mm]")
-        ax.set_ylabel(f"{view[1]} [mm]")
-    axes[0, -1].legend(handles=tree_legend(drawn), loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
     n_seg = int(np.count_nonzero(tree.parent >= 0))
-    fig.suptitle(f"{tree.run_id}: the whole tree, {tree.physics.n_terminals} fine terminals", fontsize=9)
-    fig.text(
-        0.5,
-        -0.02,
+    return draw_projections(
+        drawn,
+        path,
+        f"{tree.run_id}: the whole tree, {tree.physics.n_terminals} fine terminals",
         f"{segments.size} of {n_seg} segments drawn (every annealed one, a uniform sample of the fine ones); "
         "line width ∝ radius; grey: tissue",
-        ha="center",
-        fontsize=7,
+        width_max=3.0,
+        segments=segments,
     )
-    fig.tight_layout()
-    return save(fig, path, dpi=TREE_DPI)
 
 
 @styled
