@@ -35,6 +35,7 @@ __all__ = [
     "path_sums",
     "inlet_of",
     "select_trees",
+    "kept_tree",
     "contract_short_segments",
     "segment_lengths",
     "terminals_downstream",
@@ -302,10 +303,23 @@ def select_trees(parent, position, radius, kind, inlets):
     if ((inlets < 0) | (inlets >= parent.size)).any() or (parent[inlets] != -1).any():
         raise ValueError(f"inlets: {inlets.tolist()} are not all inlet nodes (parent -1)")
     index = np.flatnonzero(np.isin(inlet_of(parent), inlets))
+    return (
+        kept_tree(parent, index),
+        np.asarray(position)[index],
+        np.asarray(radius)[index],
+        np.asarray(kind)[index],
+        index,
+    )
+
+
+def kept_tree(parent, index) -> np.ndarray:
+    """The parent array of the nodes ``index`` (increasing; every kept node's parent kept too),
+    renumbered 0.. in that order: a top part of a tree, or whole trees of a forest."""
+    parent = _parent_array(parent)
+    index = np.asarray(index, dtype=np.int64)
     new = np.full(parent.size, -1, dtype=np.int64)
     new[index] = np.arange(index.size)
-    sub_parent = np.where(parent[index] >= 0, new[np.maximum(parent[index], 0)], -1)
-    return (sub_parent, np.asarray(position)[index], np.asarray(radius)[index], np.asarray(kind)[index], index)
+    return np.where(parent[index] >= 0, new[np.maximum(parent[index], 0)], -1)
 
 
 def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGMENT_LENGTH, length=None):

@@ -79,6 +79,7 @@ from ..model.topology import (
     KIND_TERRITORY_ROOT,
     _levels,
     _pointer_jump_root,
+    kept_tree,
     path_sums,
 )
 from ..store.extended import ExtendedStore
@@ -311,12 +312,10 @@ def lumped_network(tree: WholeTree, solution: Poiseuille, table: pd.DataFrame | 
     table = territory_table(tree, solution) if table is None else table
     _, territory = territories(tree.parent, tree.kind)
     keep = np.flatnonzero((territory < 0) | (tree.kind == KIND_TERRITORY_ROOT))  # the annealed part
-    new = np.full(tree.parent.size, -1, dtype=np.int64)
-    new[keep] = np.arange(keep.size)
-    parent = np.where(tree.parent[keep] >= 0, new[np.maximum(tree.parent[keep], 0)], -1)
+    parent = kept_tree(tree.parent, keep)
     roots = table["node"].to_numpy()
     lumped = Lumped(
-        node=new[roots],
+        node=np.searchsorted(keep, roots),
         name=[f"territory{r}" for r in roots.tolist()],
         resistance=table["resistance_lumped"].to_numpy(),
         length=table["path_length_mean"].to_numpy(),
