@@ -454,6 +454,7 @@ def reduce_whole_tree(path: str | os.PathLike, output_dir: str | os.PathLike | N
     )
     found.update(published_band(tree, solution))
     table = territory_table(tree, solution)
+    found["lumped_over_network_median"] = float(np.median(table.resistance_lumped / table.resistance_network))
     return WholeTreeResult(tree, solution, morph, orders_of, pressure_ds, found, table, time.monotonic() - started)
 
 
@@ -539,9 +540,6 @@ def reduce_extended(
         run_id = whole.tree.run_id
         seconds = result.seconds[run_id] = {"reduce": whole.seconds}
         table = whole.territory
-        whole.anatomy["lumped_over_network_median"] = float(
-            np.median(table.resistance_lumped / table.resistance_network)
-        )
         if exports:
             try:
                 started = time.monotonic()
