@@ -206,3 +206,17 @@ def assert_killed_job_resumes_bit_identically(overrides: list[str], kill_before:
 def store_attrs(path: Path) -> dict:
     """Root attributes read straight from zarr.json (an atomic file: safe while a job writes)."""
     return json.loads((path / "zarr.json").read_text())["attributes"]
+
+
+def png_is_a_real_figure(path: Path, min_shape: tuple[int, int] = (400, 600)) -> None:
+    """A PNG of at least ``min_shape`` pixels with ink, colours and grey levels: not blank."""
+    import matplotlib.image as mpimg
+
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", path
+    assert path.stat().st_size > 20_000, path
+    img = mpimg.imread(path)[..., :3]
+    assert img.shape[0] > min_shape[0] and img.shape[1] > min_shape[1], (path, img.shape)
+    ink = (img < 0.9).any(axis=-1).mean()  # fraction of pixels that are not (near) white
+    assert 0.01 < ink < 0.9, (path, ink)
+    sample = (img[::3, ::3] * 255).astype(np.uint8).reshape(-1, 3)
+    assert len(np.unique(sample, axis=0)) > 20, path  # colours and grey levels, not one tone

@@ -285,7 +285,9 @@ def test_territories_are_the_voxels_nearest_to_each_terminal(heart):
 
 def test_extend_keys_leave_the_runs_identity_alone(tmp_path):
     (a,) = sweep.expand(config.compose([f"output_dir={tmp_path}"]))
-    (b,) = sweep.expand(config.compose([f"output_dir={tmp_path}", "extend.n_terminals=5e5", "extend.runs=all"]))
+    (b,) = sweep.expand(
+        config.compose([f"output_dir={tmp_path}", "extend.n_terminals=5e5", "extend.runs=all", "extend.zerod=full"])
+    )
     assert "extend" not in a.config and a.config == b.config
     assert store.config_hash(a.config) == store.config_hash(b.config)
 
@@ -297,6 +299,7 @@ def test_extend_keys_leave_the_runs_identity_alone(tmp_path):
         ("extend.runs=worst", "extend.runs"),
         ("extend.batch_territories=0", "extend.batch_territories"),
         ("extend.seed=-1", "extend.seed"),
+        ("extend.zerod=partial", "extend.zerod"),
     ],
 )
 def test_bad_extend_settings_name_the_field(override, field):

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
+from helpers import png_is_a_real_figure
 
 from vasc_pipeline import config, job, morphometry, store, sweep
 from vasc_pipeline import reduce as reduce_mod
@@ -226,19 +227,6 @@ def test_comparison_table_stored_printed_and_csv(swept, summary):
     assert str(morph["best_run_id"].sel(point).values) in printed
 
 
-def _png_is_a_real_figure(path: Path, min_shape: tuple[int, int] = (400, 600)) -> None:
-    import matplotlib.image as mpimg
-
-    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", path
-    assert path.stat().st_size > 20_000, path
-    img = mpimg.imread(path)[..., :3]
-    assert img.shape[0] > min_shape[0] and img.shape[1] > min_shape[1], (path, img.shape)
-    ink = (img < 0.9).any(axis=-1).mean()  # fraction of pixels that are not (near) white
-    assert 0.01 < ink < 0.9, (path, ink)
-    sample = (img[::3, ::3] * 255).astype(np.uint8).reshape(-1, 3)
-    assert len(np.unique(sample, axis=0)) > 20, path  # colours and grey levels, not one tone
-
-
 def test_figures_exist_and_are_not_blank(swept):
     out, _, result, _ = swept
     assert not result.errors
@@ -249,7 +237,7 @@ def test_figures_exist_and_are_not_blank(swept):
     assert names == expected  # no steps axis: no convergence or consistency figure
     for p in result.figures:
         assert p.parent == out / "figures"
-        _png_is_a_real_figure(p)
+        png_is_a_real_figure(p)
 
 
 def test_best_trees_are_exported_as_vtp_csv_and_0d_json(swept):
@@ -314,8 +302,8 @@ def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_pa
     assert costs.steps_done.sel(steps=30000).values.ravel().tolist() == [30000, 30000]
     conv, consistency = tmp_path / "figures" / "convergence.png", tmp_path / "figures" / "consistency.png"
     assert conv in result.figures and consistency in result.figures
-    _png_is_a_real_figure(conv)
-    _png_is_a_real_figure(consistency, min_shape=(400, 400))  # 2 x 2 small panels
+    png_is_a_real_figure(conv)
+    png_is_a_real_figure(consistency, min_shape=(400, 400))  # 2 x 2 small panels
     spread = xr.open_zarr(tmp_path / "summary.zarr", group="morphometry")["trunk_spread"]
     assert spread.notnull().all()  # the number printed on each row of consistency.png
     assert not (tmp_path / "figures" / "mb_effect.png").exists()  # a single m_b
@@ -326,7 +314,7 @@ def test_grid_with_a_steps_axis_gets_a_steps_dim_and_a_convergence_figure(tmp_pa
     both = tmp_path / "both.png"
     done = subprocess.run([*cli, str(both), f"paper={tmp_path}", f"fast={tmp_path}"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
-    _png_is_a_real_figure(both)
+    png_is_a_real_figure(both)
     bad = subprocess.run([*cli, str(both), f"x={tmp_path / 'nowhere'}"], capture_output=True, text=True)
     assert bad.returncode == 2 and "reduce the sweep first" in bad.stderr
 
@@ -552,7 +540,7 @@ def test_a_tissue_that_is_not_a_heart_is_reduced_without_the_kassab_comparison(t
     assert {"morphometry.png", "asymmetry.png", "cost_traces.png", "size_scan.png"} <= names, names
     assert not {"morphometry_vs_kassab.png", "agreement_vs_n.png"} & names, names
     for p in result.figures:
-        _png_is_a_real_figure(p, min_shape=(200, 300))
+        png_is_a_real_figure(p, min_shape=(200, 300))
     assert len(result.trees) == 3 * len(result.best)  # the rest as for a heart
 
 

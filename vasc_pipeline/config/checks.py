@@ -18,6 +18,7 @@ from .rules import MAX_STEPS, MAX_TERMINALS, SEED_ACCEPTED, SWEPT_KEYS, seed_ok,
 from .schema import (
     ANNEAL_INITS,
     EXTEND_RUNS,
+    EXTEND_ZERODS,
     GAMMA_RANGE,
     INLET_ASSIGNMENTS,
     MAX_CALIBRATION_SAMPLES,
@@ -389,3 +390,8 @@ def _validate_extend(e: ExtendConfig) -> None:
         raise ConfigError(f"extend.batch_territories must be an integer in [1, 1e7], got {b!r}")
     if e.seed is not None and not seed_ok(e.seed):
         raise ConfigError(f"extend.seed must be {SEED_ACCEPTED} or null (the run's own seed), got {e.seed!r}")
+    if e.zerod not in EXTEND_ZERODS:
+        raise ConfigError(
+            f"extend.zerod must be one of {', '.join(EXTEND_ZERODS)} (the whole tree's 0D network: each territory's "
+            f"subtree one lumped resistance, or every vessel), got {e.zerod!r}"
+        )

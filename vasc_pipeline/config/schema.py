@@ -57,6 +57,8 @@ CONFIG_DIR = _PACKAGE_DIR / "conf" if (_PACKAGE_DIR / "conf").is_dir() else _PAC
 STAGES = ("run", "reduce", "extend")  # run: sweep then reduction; reduce: reduction of existing runs only;
 # extend: the whole tree below existing runs (vasc_pipeline.pipeline.extend)
 EXTEND_RUNS = ("best", "all")  # extend.runs: the lowest-cost seed of each cell, or every complete run
+# extend.zerod: the whole tree's 0D network, each territory's subtree one lumped resistance or every vessel
+EXTEND_ZERODS = ("lumped", "full")
 PAPER_STEPS_AT_1000 = 1e9  # the paper's ~1e9 updates for 1000 terminals, steps ∝ N^2
 HEART_EXCLUSION_VOXEL_SIZE = 1.1533753893850243e-3  # m: R_supply / 4 of the heart at N = 500
 MAX_CALIBRATION_SAMPLES = 10**7  # calibration moves (and adaptation windows): beyond, memory and time, no accuracy
@@ -291,6 +293,7 @@ class ExtendConfig(Settings):
     runs: str = "best"  # "best": the lowest-cost seed of each cell; "all": every complete run
     batch_territories: int = 200  # territories per task (the result does not depend on it)
     seed: Optional[int] = None  # None: the run's own seed
+    zerod: str = "lumped"  # the reduction's 0D network of the whole tree: "lumped" territories or "full"
 
 
 @dataclass

@@ -48,7 +48,7 @@ import numpy as np
 from .._jit import jit
 from ..model.physics import CostTables, Physics, cost_tables, segment_factors
 from ..model.rng import seed_state
-from ..model.topology import KIND_TERMINAL, segment_lengths, terminals_downstream
+from ..model.topology import KIND_TERMINAL, KIND_TERRITORY_ROOT, segment_lengths, terminals_downstream
 from .cco import SiteDomain, grow_arrays
 
 __all__ = [
@@ -75,9 +75,8 @@ __all__ = [
     "TERRITORY_FIELDS",
 ]
 
-# tree/kind of an annealed terminal in the whole tree: the root of its territory's subtree, one
-# child (0 inlet, 1 bifurcation and 2 terminal as in a run store)
-KIND_TERRITORY_ROOT = 3
+# tree/kind of an annealed terminal in the whole tree (KIND_TERRITORY_ROOT, a pass-through node of
+# vasc_pipeline.model.topology): the root of its territory's subtree, one child
 # The voxel codes of a territory's box (TerritoryInput.box)
 CODE_OUTSIDE, CODE_TERRITORY, CODE_TISSUE, CODE_CAVITY = 0, 1, 2, 3
 

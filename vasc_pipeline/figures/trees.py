@@ -17,7 +17,7 @@ from matplotlib.patches import Rectangle
 
 from .style import MM, TREE_DPI, cell_dims, reference_point, save, styled, subplots
 
-__all__ = ["plot_tree", "plot_consistency", "load_tree", "draw_tree", "tree_views", "tree_legend"]
+__all__ = ["plot_tree", "plot_consistency", "load_tree", "draw_tree", "draw_projections", "tree_views", "tree_legend"]
 
 _COLORS = matplotlib.colormaps["tab10"]  # one colour per inlet's tree
 
@@ -53,18 +53,27 @@ def load_tree(store_path) -> dict:
 
 
 def tree_views(tree: dict) -> tuple[tuple[str, str], ...]:
-    """The projections drawn: x-y only for a 2-D tissue (one voxel layer), else x-y, x-z and y-z."""
-    return _VIEWS_3D[:1] if tree["mask"].shape[0] == 1 else _VIEWS_3D
+    """The projections drawn: x-y only for a 2-D tissue (one voxel layer), else (or with no mask)
+    x-y, x-z and y-z."""
+    return _VIEWS_3D[:1] if tree["mask"] is not None and tree["mask"].shape[0] == 1 else _VIEWS_3D
 
 
-def draw_tree(ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: float = 3.5) -> None:
-    """One projection of ``tree`` (from :func:`load_tree`) on ``ax``: tissue outline, vessels, inlets."""
+def draw_tree(
+    ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: float = 3.5, segments: np.ndarray | None = None
+) -> None:
+    """One projection of ``tree`` (from :func:`load_tree`) on ``ax``: tissue outline, vessels, inlets.
+
+    ``segments``: the segments drawn (their child nodes; default all), a subsample of a tree too
+    large to draw whole; the line widths still scale with the widest of all.
+    """
     a, b = view
     parent, pos, radius = tree["parent"], tree["position_mm"], tree["radius"]
     h, origin = tree["voxel_size"], tree["origin"]
-    seg = np.flatnonzero(parent >= 0)
-    proj = tree["mask"].any(axis=_MASK_AXIS[view])  # rows, cols: x-y -> (y, x); x-z -> (z, x); y-z -> (z, y)
+    every = np.flatnonzero(parent >= 0)
+    seg = every if segments is None else np.asarray(segments)
     col_axis, row_axis = _AXIS[a], _AXIS[b]
+    proj = np.zeros((0, 0), bool) if tree["mask"] is None else tree["mask"].any(axis=_MASK_AXIS[view])
+    # rows, cols: x-y -> (y, x); x-z -> (z, x); y-z -> (z, y)
     cols = (origin[col_axis] + h * np.arange(proj.shape[1])) * MM
     rows = (origin[row_axis] + h * np.arange(proj.shape[0])) * MM
     if proj.any() and not proj.all() and min(proj.shape) > 1:
@@ -88,7 +97,7 @@ def draw_tree(ax, tree: dict, view: tuple[str, str] = ("x", "y"), width_max: flo
     ax.add_collection(
         LineCollection(
             lines,
-            linewidths=0.25 + width_max * radius[s] / float(radius[seg].max()),
+            linewidths=0.25 + width_max * radius[s] / float(radius[every].max()),
             colors=[_COLORS(int(i) % 10) for i in inlet_index],
             capstyle="round",
         )
@@ -122,23 +131,28 @@ def plot_tree(store_path, path, title: str | None = None) -> Path:
     A 3-D tree gets three panels (x-y, x-z, y-z); a 2-D one (single voxel layer) one.
     """
     tree = load_tree(store_path)
+    seg = tree["parent"] >= 0
+    note = (
+        f"line width ∝ vessel radius (thickest: {2 * tree['radius'][seg].max() * MM:.2g} mm diameter); grey: tissue "
+        "(projection of the voxel mask)"
+    )
+    return draw_projections(tree, path, title or tree["run_id"], note)
+
+
+def draw_projections(
+    tree: dict, path, title: str, note: str, width_max: float = 3.5, segments: np.ndarray | None = None
+) -> Path:
+    """A tree (:func:`load_tree`'s dict) in every projection of :func:`tree_views`, with its inlets'
+    legend, ``title`` above and ``note`` below; ``segments`` as in :func:`draw_tree`."""
     views = tree_views(tree)
     fig, axes = subplots(1, len(views), figsize=(3.4 * len(views) + 0.6, 3.6), squeeze=False)
     for ax, view in zip(axes[0], views):
-        draw_tree(ax, tree, view)
+        draw_tree(ax, tree, view, width_max=width_max, segments=segments)
         ax.set_xlabel(f"{view[0]} [mm]")
         ax.set_ylabel(f"{view[1]} [mm]")
     axes[0, -1].legend(handles=tree_legend(tree), loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
-    fig.suptitle(title or tree["run_id"], fontsize=9)
-    seg = tree["parent"] >= 0
-    fig.text(
-        0.5,
-        -0.02,
-        f"line width ∝ vessel radius (thickest: {2 * tree['radius'][seg].max() * MM:.2g} mm diameter); grey: tissue "
-        "(projection of the voxel mask)",
-        ha="center",
-        fontsize=7,
-    )
+    fig.suptitle(title, fontsize=9)
+    fig.text(0.5, -0.02, note, ha="center", fontsize=7)
     fig.tight_layout()
     return save(fig, path, dpi=TREE_DPI)
 

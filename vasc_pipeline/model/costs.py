@@ -10,13 +10,14 @@ Amanatides-Woo, the supply map a brute-force distance test per terminal.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from .physics import Physics, cost_tables
+from .physics import TABLE_FLOW, TABLE_RESISTANCE, Physics, cost_tables, segment_factors
 from .tissue import ExclusionGrid, Tissue
+from .topology import KIND_BIFURCATION, KIND_INLET, KIND_TERMINAL, path_sums, terminals_downstream
 from .topology import segment_lengths as _segment_lengths
-from .topology import topological_order
 from .tree import Tree
 
 __all__ = [
@@ -32,6 +33,9 @@ __all__ = [
     "supply_counts",
     "supply_cost",
     "node_pressures",
+    "Poiseuille",
+    "poiseuille",
+    "tree_pressures",
     "full_costs",
     "total_cost",
     "vascular_cost",
@@ -184,11 +188,50 @@ def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = No
     lengths = segment_lengths(tree) if lengths is None else lengths
     n = tree.n_downstream
     drop = tables.flow[n] * tables.resistance[n] * lengths
-    pressure = np.zeros(tree.n_nodes)
-    pressure[: tree.n_inlets] = physics.pressure_inlet
-    for node in topological_order(tree.parent)[tree.n_inlets :].tolist():  # parents first
-        pressure[node] = pressure[tree.parent[node]] - drop[node]
-    return pressure
+    return path_sums(tree.parent, -drop, physics.pressure_inlet)
+
+
+class Poiseuille(NamedTuple):
+    """The model's Poiseuille solution of a tree (:func:`poiseuille`), node-indexed (segment
+    values at a segment's child node, 0 at inlets).
+
+    Attributes
+    ----------
+    n_downstream : int64 (node,)   terminals downstream (their flows add up)
+    length : float64 (node,)       segment length [m]
+    flow : float64 (node,)         n Q0 / N [m^3 s^-1]
+    resistance : float64 (node,)   8 mu L / (pi r^4) of the segment [Pa s m^-3]
+    pressure : float64 (node,)     [Pa], ``physics.pressure_inlet`` at the inlets
+    """
+
+    n_downstream: np.ndarray
+    length: np.ndarray
+    flow: np.ndarray
+    resistance: np.ndarray
+    pressure: np.ndarray
+
+
+def poiseuille(parent: np.ndarray, position: np.ndarray, physics: Physics) -> Poiseuille:
+    """The Poiseuille solution of a tree in any node layout (a run store's, an extended store's
+    with its pass-through nodes): every node without children is a terminal, flows and radii
+    follow from the terminals downstream under ``physics``, pressures drop from
+    ``physics.pressure_inlet`` at the inlets (:func:`node_pressures`, for arrays: the same
+    values on a run's tree, bit for bit)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    childless = np.bincount(parent[parent >= 0], minlength=parent.size) == 0
+    kind = np.where(parent < 0, KIND_INLET, np.where(childless, KIND_TERMINAL, KIND_BIFURCATION))
+    n = terminals_downstream(parent, kind)
+    factors = segment_factors(physics, n)
+    length = _segment_lengths(parent, position)
+    resistance = factors[TABLE_RESISTANCE] * length
+    drop = factors[TABLE_FLOW] * factors[TABLE_RESISTANCE] * length
+    pressure = path_sums(parent, -drop, physics.pressure_inlet)
+    return Poiseuille(n, length, factors[TABLE_FLOW], resistance, pressure)
+
+
+def tree_pressures(parent: np.ndarray, position: np.ndarray, physics: Physics) -> np.ndarray:
+    """Pressure [Pa] at every node of a tree in any node layout (:func:`poiseuille`)."""
+    return poiseuille(parent, position, physics).pressure
 
 
 def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms | None = None) -> dict[str, float]:

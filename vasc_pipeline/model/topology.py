@@ -6,7 +6,8 @@ store holds them:
 - ``parent``   int64 (node,)     parent node, -1 at inlets
 - ``position`` float64 (node, 3) metres
 - ``radius``   float64 (node,)   radius of the segment from the node to its parent, metres
-- ``kind``     int8 (node,)      0 inlet, 1 bifurcation, 2 terminal
+- ``kind``     int8 (node,)      0 inlet, 1 bifurcation, 2 terminal, 3 pass-through (the whole
+                                 tree's annealed terminals: one child)
 
 A segment is identified by its child node, so per-segment arrays are indexed by node and
 hold a filler at inlets (0 for lengths). Several inlets make a forest; every function
@@ -25,19 +26,26 @@ __all__ = [
     "KIND_INLET",
     "KIND_BIFURCATION",
     "KIND_TERMINAL",
+    "KIND_TERRITORY_ROOT",
     "MIN_SEGMENT_LENGTH",
     "check_tree_arrays",
     "children_of",
     "node_depth",
     "topological_order",
+    "path_sums",
     "inlet_of",
     "select_trees",
+    "kept_tree",
     "contract_short_segments",
     "segment_lengths",
     "terminals_downstream",
 ]
 
 KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL = 0, 1, 2
+# A pass-through node: one child, whose segment continues the node's own vessel (same radius and
+# flow). The whole tree's annealed terminals, each the root of its territory's subtree
+# (vasc_pipeline.engine.extend), are such nodes: no branch point, so no vessel ends there.
+KIND_TERRITORY_ROOT = 3
 # m: shorter segments between branch points are contracted. Below the radius of every vessel
 # of the heart's trees (33 um at N = 6000), above what the final polish leaves where a branch
 # point's optimum is its parent's (up to ~6 um; measured, see vasc_pipeline.reduce.morphometry).
@@ -118,6 +126,46 @@ def inlet_of(parent) -> np.ndarray:
     return _pointer_jump_root(link)
 
 
+def path_sums(parent, weight, start=0.0) -> np.ndarray:
+    """Values summed along the paths from the inlets: ``s[v] = s[parent[v]] + weight[v]``.
+
+    Parameters
+    ----------
+    parent : int64 (node,)
+    weight : float64 (node,)
+        Added at every node (ignored at inlets).
+    start : float or float64 (node,)
+        The value at the inlets.
+
+    Returns
+    -------
+    float64 (node,)
+        One addition per node, parents first, a level of the tree at a time: a tree of any
+        size in as many NumPy steps as it is deep.
+
+    Examples
+    --------
+    >>> path_sums([-1, 0, 1, 1], [0.0, 1.0, 2.0, 3.0], 10.0).tolist()
+    [10.0, 11.0, 13.0, 14.0]
+    """
+    parent = _parent_array(parent)
+    weight = np.asarray(weight, dtype=float)
+    out = np.zeros(parent.size)
+    out[parent < 0] = np.broadcast_to(np.asarray(start, dtype=float), parent.shape)[parent < 0]
+    for level in _levels(parent):
+        out[level] = out[parent[level]] + weight[level]
+    return out
+
+
+def _levels(parent: np.ndarray) -> list[np.ndarray]:
+    """The non-inlet nodes by depth (1, 2, ...), each level in increasing node order: a pass over
+    a tree from its inlets (or toward them, reversed) in as many NumPy steps as it is deep."""
+    depth = node_depth(parent)
+    order = np.argsort(depth, kind="stable")
+    bounds = np.searchsorted(depth[order], np.arange(1, int(depth.max(initial=0)) + 2)).tolist()
+    return [order[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
 # The numpydoc blocks here repeat one another (parent, the shapes returned) on purpose: each
 # public helper documents its own arguments.
 def children_of(parent) -> np.ndarray:
@@ -172,7 +220,8 @@ def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcatio
     parent : int64 (node,)
     kind : int8 (node,)
         0 inlet (exactly one child, parent -1), 1 bifurcation (two children),
-        2 terminal (no children).
+        2 terminal (no children), 3 pass-through (:data:`KIND_TERRITORY_ROOT`: one child,
+        which is no pass-through node itself).
     radius : float64 (node,), optional
         Must be finite and > 0 on every segment (every non-inlet node).
     position : float64 (node, 3), optional
@@ -186,8 +235,8 @@ def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcatio
     kind = np.asarray(kind)
     if kind.shape != (n,):
         raise ValueError(f"kind: expected shape ({n},) like parent, got {kind.shape}")
-    if not np.isin(kind, (KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL)).all():
-        raise ValueError("kind: accepted values are 0 (inlet), 1 (bifurcation), 2 (terminal)")
+    if not np.isin(kind, (KIND_INLET, KIND_BIFURCATION, KIND_TERMINAL, KIND_TERRITORY_ROOT)).all():
+        raise ValueError("kind: accepted values are 0 (inlet), 1 (bifurcation), 2 (terminal), 3 (pass-through)")
     if n == 0 or not (kind == KIND_INLET).any():
         raise ValueError("kind: the tree needs at least one inlet (kind 0)")
     mismatch = (kind == KIND_INLET) != (parent < 0)
@@ -198,9 +247,10 @@ def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcatio
             f"(kind 0) and only inlets have parent -1"
         )
     n_children = np.bincount(parent[parent >= 0], minlength=n)
-    expected = np.choose(kind.astype(np.int64), (1, 2, 0))
+    expected = np.choose(kind.astype(np.int64), (1, 2, 0, 1))
+    through = kind == KIND_TERRITORY_ROOT
     bad = (
-        ((n_children < expected) | ((kind == KIND_TERMINAL) & (n_children > 0)))
+        ((n_children < expected) | ((kind == KIND_TERMINAL) & (n_children > 0)) | (through & (n_children != 1)))
         if multifurcations
         else n_children != expected
     )
@@ -209,8 +259,12 @@ def check_tree_arrays(parent, kind, radius=None, position=None, *, multifurcatio
         need = "at least 1, a branching node at least 2" if multifurcations else "1, a bifurcation 2"
         raise ValueError(
             f"parent/kind: node {i} of kind {int(kind[i])} has {int(n_children[i])} children; an "
-            f"inlet needs {need}, a terminal 0"
+            f"inlet needs {need}, a pass-through node 1, a terminal 0"
         )
+    chained = through & (parent >= 0) & through[np.maximum(parent, 0)]
+    if chained.any():  # a vessel through two pass-through nodes: its length would need the whole path
+        i = int(np.flatnonzero(chained)[0])
+        raise ValueError(f"parent/kind: pass-through node {i} hangs from pass-through node {int(parent[i])}")
     node_depth(parent)  # raises on cycles
     if radius is not None:
         radius = np.asarray(radius, dtype=float)
@@ -249,14 +303,28 @@ def select_trees(parent, position, radius, kind, inlets):
     if ((inlets < 0) | (inlets >= parent.size)).any() or (parent[inlets] != -1).any():
         raise ValueError(f"inlets: {inlets.tolist()} are not all inlet nodes (parent -1)")
     index = np.flatnonzero(np.isin(inlet_of(parent), inlets))
+    return (
+        kept_tree(parent, index),
+        np.asarray(position)[index],
+        np.asarray(radius)[index],
+        np.asarray(kind)[index],
+        index,
+    )
+
+
+def kept_tree(parent, index) -> np.ndarray:
+    """The parent array of the nodes ``index`` (increasing; every kept node's parent kept too),
+    renumbered 0.. in that order: a top part of a tree, or whole trees of a forest."""
+    parent = _parent_array(parent)
+    index = np.asarray(index, dtype=np.int64)
     new = np.full(parent.size, -1, dtype=np.int64)
     new[index] = np.arange(index.size)
-    sub_parent = np.where(parent[index] >= 0, new[np.maximum(parent[index], 0)], -1)
-    return (sub_parent, np.asarray(position)[index], np.asarray(radius)[index], np.asarray(kind)[index], index)
+    return np.where(parent[index] >= 0, new[np.maximum(parent[index], 0)], -1)
 
 
-def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGMENT_LENGTH):
-    """Merge every branching node that sits on its parent node into that parent.
+def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGMENT_LENGTH, length=None):
+    """Merge every branching node that sits on its parent node into that parent, and every
+    pass-through node (kind 3) into its vessel.
 
     Parameters
     ----------
@@ -265,13 +333,18 @@ def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGM
     kind : int8 (node,)
     min_length : float
         Segments shorter than this (metres, >= 0) whose child is a branching node
-        (kind 1) are contracted; 0 contracts nothing.
+        (kind 1) are contracted; 0 contracts none of them (pass-through nodes still go).
+    length : float64 (node,), optional
+        The length of the vessel ending at each node (metres); default the distance to its
+        parent. A segment below a pass-through node is as long as its vessel from the branch
+        point above: give that length here, or such a vessel may be taken for a short one.
 
     Returns
     -------
     parent : int64 (node_kept,)
         Parent array of the contracted tree over the kept nodes (renumbered; nodes keep
-        their relative order). A node may now have more than two children.
+        their relative order). A node may now have more than two children; a pass-through
+        node's child hangs from the branch point above it.
     index : int64 (node_kept,)
         Original index of every kept node (take position, radius and kind with it).
 
@@ -286,7 +359,10 @@ def contract_short_segments(parent, position, kind, min_length: float = MIN_SEGM
     parent = _parent_array(parent)
     if not (np.isfinite(min_length) and min_length >= 0):
         raise ValueError(f"min_length: must be a finite length >= 0 (metres), got {min_length}")
-    gone = (parent >= 0) & (np.asarray(kind) == KIND_BIFURCATION) & (segment_lengths(parent, position) < min_length)
+    kind = np.asarray(kind)
+    length = segment_lengths(parent, position) if length is None else np.asarray(length, dtype=float)
+    short = (kind == KIND_BIFURCATION) & (length < min_length)
+    gone = (parent >= 0) & (short | (kind == KIND_TERRITORY_ROOT))
     # every contracted node points to its parent, every kept one to itself: the root of a
     # node in that forest is its nearest kept ancestor (or itself)
     kept_ancestor = _pointer_jump_root(np.where(gone, parent, np.arange(parent.size)))
@@ -328,9 +404,6 @@ def terminals_downstream(parent, kind) -> np.ndarray:
     """
     parent = _parent_array(parent)
     count = (np.asarray(kind) == KIND_TERMINAL).astype(np.int64)
-    # Deepest nodes first: each node adds its (finished) count to its parent's.
-    for v in reversed(topological_order(parent).tolist()):
-        p = parent[v]
-        if p >= 0:
-            count[p] += count[v]
+    for level in reversed(_levels(parent)):  # deepest first: each node adds its (finished) count to its parent's
+        np.add.at(count, parent[level], count[level])
     return count

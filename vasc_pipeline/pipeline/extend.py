@@ -12,7 +12,9 @@ is the same: a pure function of the source, the config and the seed, whatever th
 :func:`extend_output_dir` picks the runs (the lowest-cost seed of each cell, or every complete
 run with ``extend.runs=all``) and fans the batches out on the sweep's Dask cluster
 (``cluster=local|address|slurm``, :func:`vasc_pipeline.pipeline.cluster.open_client`);
-:func:`extend_stage` is what ``python -m vasc_pipeline +stage=extend`` runs.
+:func:`extend_stage` is what ``python -m vasc_pipeline +stage=extend`` runs; it ends with the
+reduction of the output_dir's whole trees (:func:`vasc_pipeline.reduce.extended.reduce_extended`,
+``extend.zerod`` its 0D network).
 """
 
 from __future__ import annotations
@@ -367,7 +369,8 @@ def extend_output_dir(cfg: Any, client: Any = None, stream: TextIO | None = None
 
 def extend_stage(cfg: Any, stream: TextIO | None = None) -> int:
     """``+stage=extend``: extend the runs of ``cfg.output_dir``; returns the exit status (0 every
-    chosen run extended, 1 one failed, 2 bad input: nothing was extended, 130 interrupted)."""
+    chosen run extended and the whole trees reduced, 1 one failed or the reduction did, 2 bad input:
+    nothing was extended, 130 interrupted)."""
     from .. import config as _config
     from ..config.schema import ConfigError
 
@@ -399,4 +402,17 @@ def extend_stage(cfg: Any, stream: TextIO | None = None) -> int:
             "resumes.\n"
         )
         return 130
-    return 1 if result["failed"] else 0
+    reduced_ok = True
+    if result["runs"]:
+        from ..figures.extended import draw_extended
+        from ..reduce.extended import reduce_extended
+
+        try:  # every complete whole tree of the output_dir: morphometry, pressures, exports, then figures
+            reduction = reduce_extended(cfg.output_dir, zerod=cfg.extend.zerod, stream=stream)
+            if reduction.summary is not None:
+                reduction.figures = draw_extended(reduction)
+            reduced_ok = not reduction.errors
+        except Exception as exc:  # the extended stores are complete: report; +stage=reduce reduces them again
+            stream.write(f"vasc_pipeline: the whole trees' reduction FAILED: {type(exc).__name__}: {exc}\n")
+            reduced_ok = False
+    return 1 if result["failed"] or not reduced_ok else 0

@@ -492,7 +492,7 @@ def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
         )
         return 2
     try:
-        reduction = reduce_and_draw(output_dir, stream=stream)
+        reduction = reduce_and_draw(output_dir, stream=stream, extended_zerod=cfg.extend.zerod)
     except (ReductionError, OSError) as exc:
         stream.write(f"vasc_pipeline: error: {exc}\n")
         return 2

@@ -18,7 +18,12 @@ __all__ = ["reduce_and_draw"]
 
 
 def reduce_and_draw(
-    output_dir: str | os.PathLike, *, figures: bool = True, exports: bool = True, stream: TextIO | None = None
+    output_dir: str | os.PathLike,
+    *,
+    figures: bool = True,
+    exports: bool = True,
+    stream: TextIO | None = None,
+    extended_zerod: str = "lumped",
 ):
     """:func:`vasc_pipeline.reduce.reduce` of ``output_dir``, then its figures into ``<output_dir>/figures/``.
 
@@ -30,15 +35,27 @@ def reduce_and_draw(
     from .. import reduce as reduction  # the package's attribute: what a caller (or a test) replaces
 
     stream = stream or sys.stdout
-    result = reduction.reduce(output_dir, exports=exports, stream=stream)
+    result = reduction.reduce(output_dir, exports=exports, stream=stream, extended_zerod=extended_zerod)
     if figures:
-        try:
-            from ..figures import make_figures
+        from ..figures import make_figures
+        from ..figures.extended import draw_extended
 
-            result.figures = make_figures(result.summary, output_dir)
-            stream.write(f"  figures: {Path(output_dir) / FIGURES_DIR} ({len(result.figures)} PNG)\n")
-        except Exception as exc:
-            result.errors["figures"] = f"{type(exc).__name__}: {exc}"
-            stream.write(f"  figures FAILED: {result.errors['figures']}\n")
-        stream.flush()
+        _draw(lambda: make_figures(result.summary, output_dir), result, "figures", stream)
+        whole = result.extended
+        if whole is not None and whole.summary is not None:
+            whole.figures = _draw(lambda: draw_extended(whole), result, "extended figures", stream)
     return result
+
+
+def _draw(draw, result, stage: str, stream: TextIO) -> list:
+    """The figures ``draw`` makes, added to ``result.figures``; a failure goes to ``result.errors``."""
+    try:
+        paths = draw()
+    except Exception as exc:
+        result.errors[stage] = f"{type(exc).__name__}: {exc}"
+        stream.write(f"  {stage} FAILED: {result.errors[stage]}\n")
+        return []
+    result.figures.extend(paths)
+    stream.write(f"  {stage}: {len(paths)} PNG in {Path(result.output_dir) / FIGURES_DIR}\n")
+    stream.flush()
+    return paths

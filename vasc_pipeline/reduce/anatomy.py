@@ -17,7 +17,12 @@ into one flat dict of named numbers (:data:`ANATOMY_FIELDS` gives each its unit 
   stem and everything downstream; the stem diameter D_s grows as L_c^(3/7) with the crown's
   total length L_c, and the crown's volume V_c as D_s^3. The exponents are least-squares slopes
   in log-log over the stems whose crown holds at least one bifurcation (a terminal segment's
-  crown is itself and says nothing of the tree).
+  crown is itself and says nothing of the tree). A segment below a pass-through node (kind 3:
+  an extended store's annealed terminals) continues its parent's vessel and is no stem of its
+  own: the vessel's crown is its upper segment's.
+
+Every function takes the whole tree of an extended store as it is (its annealed terminals of
+kind 3, its physics of N = the fine terminals): :mod:`vasc_pipeline.reduce.extended`.
 """
 
 from __future__ import annotations
@@ -29,17 +34,17 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from ..model.costs import node_pressures
+from ..model.costs import tree_pressures
 from ..model.physics import Physics
 from ..model.topology import (
     KIND_BIFURCATION,
     KIND_TERMINAL,
+    KIND_TERRITORY_ROOT,
     inlet_of,
     segment_lengths,
     terminals_downstream,
     topological_order,
 )
-from ..model.tree import tree_from_arrays
 
 __all__ = [
     "ANATOMY_FIELDS",
@@ -81,11 +86,11 @@ def inlet_shares(parent, kind, inlet_names) -> dict[str, float]:
 
 
 def terminal_pressures(parent: np.ndarray, position: np.ndarray, physics: Physics) -> np.ndarray:
-    """Pressure [Pa] at every terminal (in node order), from the model's Poiseuille solution."""
-    tree = tree_from_arrays(parent, position, physics.n_inlets)
-    pressure = node_pressures(tree, physics)
-    k = tree.n_inlets
-    return pressure[k : k + tree.n_terminals]
+    """Pressure [Pa] at every terminal (in node order), from the model's Poiseuille solution
+    (:func:`~vasc_pipeline.model.costs.tree_pressures`: any node layout)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    terminal = (parent >= 0) & (np.bincount(parent[parent >= 0], minlength=parent.size) == 0)
+    return tree_pressures(parent, position, physics)[terminal]
 
 
 def distance_outside(points: np.ndarray, domain: np.ndarray, voxel_size: float, origin: np.ndarray) -> np.ndarray:
@@ -118,6 +123,7 @@ def crown_exponents(parent: np.ndarray, position: np.ndarray, radius: np.ndarray
             crown_length[p] += crown_length[v]
             crown_volume[p] += crown_volume[v]
     stems = (parent >= 0) & (terminals_downstream(parent, kind) >= 2) & (crown_length > 0) & (radius > 0)
+    stems &= np.asarray(kind)[np.maximum(parent, 0)] != KIND_TERRITORY_ROOT  # a vessel's continuation
     log_d = np.log(2.0 * radius[stems])
     out = {}
     for name, x, y in (

@@ -17,8 +17,9 @@ diffable and readable by any VTK XML reader. Arrays (SI units throughout):
   11), ``strahler_order`` (conventional, shifted likewise), ``length`` [m],
   ``terminals_downstream``, ``node`` (index of the segment's child node);
 - point data: ``radius`` [m] (of the segment ending at the node; at an inlet, of its
-  root segment, so that ParaView's Tube filter gives a continuous tube) and ``kind``
-  (0 inlet, 1 bifurcation, 2 terminal).
+  root segment, so that ParaView's Tube filter gives a continuous tube), ``kind``
+  (0 inlet, 1 bifurcation, 2 terminal, 3 pass-through: a whole tree's annealed terminal) and,
+  when the table has a ``pressure_Pa`` column (a whole tree's export), ``pressure`` [Pa].
 
 The CSV file has one row per node; the columns after ``z_m`` describe the segment (edge)
 from the node to its ``parent`` and are empty at inlets, which have no segment. So one
@@ -146,6 +147,7 @@ def write_vtp(path, table: pd.DataFrame) -> Path:
         '      <PointData Scalars="radius">\n',
         _data_array("radius", point_radius),
         _data_array("kind", table["kind"].to_numpy()),
+        *([_data_array("pressure", table["pressure_Pa"].to_numpy(dtype=float))] if "pressure_Pa" in table else []),
         "      </PointData>\n",
         '      <CellData Scalars="radius">\n',
         *(_data_array(k, v) for k, v in cell.items()),

@@ -8,7 +8,8 @@ topology helpers live in :mod:`vasc_pipeline.model.topology`, the orders in
 - ``parent``   int64 (node,)     parent node, -1 at inlets
 - ``position`` float64 (node, 3) metres
 - ``radius``   float64 (node,)   radius of the segment from the node to its parent, metres
-- ``kind``     int8 (node,)      0 inlet, 1 bifurcation, 2 terminal
+- ``kind``     int8 (node,)      0 inlet, 1 bifurcation, 2 terminal, 3 pass-through (an extended
+                                 store's annealed terminals: one child, no branch point)
 
 A segment is identified by its child node, so per-segment arrays are indexed by node and
 hold a filler at inlets (0 for orders and lengths, -1 for ids). Several inlets make a
@@ -48,6 +49,7 @@ from ..model.topology import (
     KIND_BIFURCATION,
     KIND_INLET,
     KIND_TERMINAL,
+    KIND_TERRITORY_ROOT,
     MIN_SEGMENT_LENGTH,
     _child_lists,
     _parent_array,
@@ -321,6 +323,29 @@ def asymmetry_statistics(asym: Asymmetry, orders=None) -> xr.Dataset:
 # --------------------------------------------------------------------------- assembly
 
 
+def _bends(parent: np.ndarray, kind: np.ndarray) -> np.ndarray:
+    """int64 (node,): where the chord from a vessel's start ends: the pass-through node above a
+    segment that continues its vessel (kind 3 parent), else the node itself."""
+    bend = np.arange(parent.size)
+    below = np.flatnonzero(parent >= 0)
+    below = below[kind[parent[below]] == KIND_TERRITORY_ROOT]
+    bend[below] = parent[below]
+    return bend
+
+
+def _contracted_lengths(parent: np.ndarray, kept: np.ndarray, position: np.ndarray, bend: np.ndarray) -> np.ndarray:
+    """Length of every segment of a contracted tree (``parent`` over the original nodes ``kept``):
+    from its new parent's position to its bend, then to its own node (0 at inlets). Without a
+    pass-through node the bend is the node: the plain distance, bit for bit."""
+    length = np.zeros(kept.size)
+    s = np.flatnonzero(parent >= 0)
+    node, start, b = kept[s], kept[parent[s]], bend[kept[s]]
+    length[s] = np.linalg.norm(position[b] - position[start], axis=-1) + np.linalg.norm(
+        position[node] - position[b], axis=-1
+    )
+    return length
+
+
 def morphometry(
     parent,
     position,
@@ -349,7 +374,9 @@ def morphometry(
         "confluence").
     min_segment_length : float
         Segments between branch points shorter than this (metres) are contracted before
-        ordering (:func:`contract_short_segments`; 0 keeps the tree as it is).
+        ordering (:func:`contract_short_segments`; 0 keeps the tree as it is). A pass-through
+        node (kind 3, the whole tree's annealed terminals) is no branch point: the segments
+        above and below it are one segment, its length theirs together.
 
     Returns
     -------
@@ -359,11 +386,12 @@ def morphometry(
         Per (scheme, order): the variables of :func:`order_statistics` and
         :func:`asymmetry_statistics`. Per scheme: ``order_shift`` (added to the raw
         orders) and ``n_elements``. Per (scheme, node): ``segment_order`` (shifted; 0 at
-        inlets and contracted segments) and ``element_id`` (-1 there). Per node:
+        inlets and contracted segments; a pass-through node's that of the segment it
+        continues in) and ``element_id`` (-1 where the order is 0). Per node:
         ``segment_diameter`` and ``segment_length`` (m, 0 at inlets). Attrs:
         ``dds_iterations``, ``dds_changed_fraction``, ``dds_converged`` (0/1, netCDF-safe),
         ``dds_tol``, ``n_inlets``, ``n_terminals``, ``n_segments`` (after contraction),
-        ``n_contracted_segments``, ``min_segment_length``, ``top_order`` (-1 when
+        ``n_contracted_segments``, ``n_pass_through``, ``min_segment_length``, ``top_order`` (-1 when
         unshifted). Every variable has ``units`` and ``long_name``.
 
     Examples
@@ -375,14 +403,20 @@ def morphometry(
     """
     full_parent = _parent_array(parent)
     check_tree_arrays(full_parent, kind, radius=radius, position=position)
+    position = np.asarray(position, dtype=float)
+    full_kind = np.asarray(kind)
     full_diameter = np.where(full_parent >= 0, 2.0 * np.asarray(radius, dtype=float), 0.0)
     full_length = segment_lengths(full_parent, position)
-    parent, kept = contract_short_segments(full_parent, position, kind, min_segment_length)
+    bend = _bends(full_parent, full_kind)
+    vessel_length = full_length + np.where(bend != np.arange(bend.size), full_length[bend], 0.0)
+    parent, kept = contract_short_segments(full_parent, position, full_kind, min_segment_length, vessel_length)
     radius = np.asarray(radius, dtype=float)[kept]
-    kind = np.asarray(kind)[kept]
+    kind = full_kind[kept]
     seg = np.flatnonzero(parent >= 0)
     diameter = full_diameter[kept]
-    length = segment_lengths(parent, np.asarray(position, dtype=float)[kept])
+    length = _contracted_lengths(parent, kept, position, bend)
+    through = np.flatnonzero(full_kind == KIND_TERRITORY_ROOT)
+    through_child = np.flatnonzero((full_parent >= 0) & (bend != np.arange(bend.size)))
     dds = diameter_defined_strahler(parent, radius, kind, max_iter=max_iter, tol=tol, reading=reading)
     raw = {"diameter_defined": dds.orders, "strahler": strahler_orders(parent, kind)}
     shifted = {k: (shift_orders(v, top, mask=parent >= 0) if top is not None else v) for k, v in raw.items()}
@@ -406,6 +440,8 @@ def morphometry(
         node_order[kept] = orders
         node_element = np.full(full_parent.size, -1, dtype=np.int64)
         node_element[kept] = el.segment_element
+        node_order[full_parent[through_child]] = node_order[through_child]  # the segment it continues in
+        node_element[full_parent[through_child]] = node_element[through_child]
         part["segment_order"] = (
             "node",
             node_order,
@@ -439,7 +475,8 @@ def morphometry(
         n_inlets=int((kind == KIND_INLET).sum()),
         n_terminals=int((kind == KIND_TERMINAL).sum()),
         n_segments=int(seg.size),
-        n_contracted_segments=int(full_parent.size - kept.size),
+        n_contracted_segments=int(full_parent.size - kept.size - through.size),
+        n_pass_through=int(through.size),
         min_segment_length=float(min_segment_length),
         top_order=-1 if top is None else int(top),
         ordering=f"diameter_defined: Jiang, Kassab & Fung 1994 {reading} reassignment "

@@ -50,6 +50,7 @@ import numpy as np
 from ..model.topology import (
     KIND_BIFURCATION,
     KIND_TERMINAL,
+    KIND_TERRITORY_ROOT,
     _child_lists,
     _parent_array,
     _pointer_jump_root,
@@ -77,7 +78,8 @@ def strahler_orders(parent, kind) -> np.ndarray:
     Terminal segments have order 1; at a branching node, the parent segment has order
     n + 1 if the two highest daughter orders are both n, else the highest daughter order
     (for a bifurcation: n + 1 if both daughters have order n). An inlet's child segments
-    are ordinary segments. Multifurcations (contracted trees) are accepted.
+    are ordinary segments. Multifurcations (contracted trees) are accepted; a pass-through
+    node's segment (kind 3) has its one daughter's order.
 
     Parameters
     ----------
@@ -104,7 +106,7 @@ def _orders_toward_the_root(parent, kind, terminal_order, confluence) -> np.ndar
 
     A terminal segment gets ``terminal_order[v]``; a branching node's segment the highest
     daughter order n, or ``confluence(v, n)`` where the two highest daughter orders are both
-    n. Inlets get 0. Returns int64 (node,).
+    n; a pass-through node's segment (kind 3) its one daughter's. Inlets get 0. Returns int64 (node,).
     """
     start, child = _child_lists(parent)
     start, child = start.tolist(), child.tolist()
@@ -116,7 +118,7 @@ def _orders_toward_the_root(parent, kind, terminal_order, confluence) -> np.ndar
         k = kinds[v]
         if k == KIND_TERMINAL:
             order[v] = terminal_order[v]
-        elif k == KIND_BIFURCATION:
+        elif k == KIND_BIFURCATION or k == KIND_TERRITORY_ROOT:  # one daughter: second stays 0, below top
             top = second = 0
             for c in child[start[v] : start[v + 1]]:
                 o = order[c]

@@ -35,6 +35,7 @@ from ..store.layout import (
     ANATOMY_CSV,
     COMPARISON_CSV,
     COMPARISON_SUMMARY_CSV,
+    EXTENDED_DIR,
     FIGURES_DIR,
     RUNS_DIR,
     SUMMARY_NAME,
@@ -44,6 +45,7 @@ from ..store.layout import (
 from ..store.sweep_lock import sweep_in_progress
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, MMHG
+from .extended import ExtendedReduction, reduce_extended
 from .reference import ARTERIES
 from .runs import ReductionError, RunInfo, best_runs, check_one_configuration, find_runs
 from .summary import COMPARISON_LEVEL, COMPARISON_SCHEME, build_summary, write_summary
@@ -92,6 +94,8 @@ class Reduction:
     errors: dict[str, str] = field(default_factory=dict)  # stage (figures, ...) -> error text
     # run id -> svZeroDSolver's largest relative inlet-pressure deviation on the exported network
     zero_d_check: dict[str, float] = field(default_factory=dict)
+    # the whole trees of extended/ (vasc_pipeline.reduce.extended); None without extended/
+    extended: ExtendedReduction | None = None
 
 
 def comparison_frame(summary: xr.DataTree) -> pd.DataFrame:
@@ -288,8 +292,16 @@ def remove_superseded_outputs(output_dir: str | os.PathLike, best: dict) -> list
     return removed
 
 
-def reduce(output_dir: str | os.PathLike, *, exports: bool = True, stream: TextIO | None = None) -> Reduction:
-    """Reduce every complete run of ``output_dir``: summary, comparison, anatomy, tree exports.
+def reduce(
+    output_dir: str | os.PathLike,
+    *,
+    exports: bool = True,
+    stream: TextIO | None = None,
+    extended_zerod: str = "lumped",
+) -> Reduction:
+    """Reduce every complete run of ``output_dir``: summary, comparison, anatomy, tree exports;
+    then, when there is an ``extended/``, its complete whole trees
+    (:func:`vasc_pipeline.reduce.extended.reduce_extended`, with ``extended_zerod`` its 0D network).
 
     Parameters
     ----------
@@ -394,4 +406,11 @@ def reduce(output_dir: str | os.PathLike, *, exports: bool = True, stream: TextI
         lines.append(f"  {stage} FAILED: {error}")
     stream.write("\n".join(lines) + "\n")
     stream.flush()
+    if (out / EXTENDED_DIR).is_dir():  # the whole trees: reduce_extended says which it leaves out
+        try:
+            result.extended = reduce_extended(out, zerod=extended_zerod, exports=exports, stream=stream)
+            result.errors.update({f"extended {k}": v for k, v in result.extended.errors.items()})
+        except Exception as exc:  # the runs' summary is written and valid: report, go on
+            result.errors["extended"] = f"{type(exc).__name__}: {exc}"
+            stream.write(f"  the whole trees' reduction FAILED: {result.errors['extended']}\n")
     return result

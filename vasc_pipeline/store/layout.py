@@ -11,6 +11,9 @@
         trees/<run_id>.vtp, .csv   the best trees' exports (vasc_pipeline.reduce.export)
         figures/*.png              the figures (vasc_pipeline.figures)
         extended/<run_id>.zarr     the whole tree below a run (+stage=extend, vasc_pipeline.store.extended)
+        extended_summary.zarr      the whole trees' reduction (vasc_pipeline.reduce.extended)
+        extended_comparison.csv    per whole tree and order: model against Kassab 1993, pressures
+        trees/<run_id>.extended.*  a whole tree's exports (.vtp, .csv, .0d.json)
 
 A run's id names its store: :func:`run_id` = :func:`cell_id` (the grid point without the
 seed, the reduction's cell) plus the seed.
@@ -33,6 +36,8 @@ __all__ = [
     "TREES_DIR",
     "FIGURES_DIR",
     "EXTENDED_DIR",
+    "EXTENDED_SUMMARY_NAME",
+    "EXTENDED_COMPARISON_CSV",
     "cell_id",
     "coords_cell_id",
     "run_id",
@@ -51,6 +56,8 @@ ANATOMY_CSV = "anatomy.csv"
 TREES_DIR = "trees"
 FIGURES_DIR = "figures"
 EXTENDED_DIR = "extended"
+EXTENDED_SUMMARY_NAME = "extended_summary.zarr"  # beside summary.zarr, never in extended/ (which holds stores)
+EXTENDED_COMPARISON_CSV = "extended_comparison.csv"
 
 
 def _number(value: float) -> str:

@@ -1,0 +1,598 @@
+"""The whole tree reduced: every complete store of ``<output_dir>/extended/`` against the pig's orders
+1-11 and the published microvascular pressures, with its exports and figures.
+
+A plain function of an output directory (no Hydra, no Dask)::
+
+    from vasc_pipeline.reduce.extended import reduce_extended
+    result = reduce_extended("results/size_scan")     # prints the table below
+    result.summary                                     # the DataTree of extended_summary.zarr
+
+For every complete, checksummed extended store (:mod:`vasc_pipeline.store.extended`):
+
+- **Morphometry** of the whole tree over all its orders, both readings of the diameter-defined
+  ordering (:func:`~vasc_pipeline.reduce.morphometry.morphometry`, ``reading="range"`` and
+  ``"confluence"``), orders shifted so that the trunk is 11; a heart's is compared with Kassab
+  et al. 1993 over orders 1-11 (element level, as the runs' reduction). The annealed terminals
+  (kind 3) are pass-through nodes: the annealed terminal segment and its subtree's root segment
+  are one segment, as long as both (:mod:`vasc_pipeline.model.topology`).
+- **Anatomy** (:func:`~vasc_pipeline.reduce.anatomy.anatomy`, the Huo-Kassab crown exponents
+  among it) with the whole tree's physics: N the fine terminals, the run's Q0, r_in, gamma, so
+  every radius and flow is the stored one.
+- **Pressures by order** from the model's Poiseuille solution
+  (:func:`~vasc_pipeline.model.costs.poiseuille`): per diameter-defined order, the mean pressure
+  along its vessels (length-weighted: every point of a vessel counts alike), the lowest (at a
+  vessel's distal end) and the highest, in Pa and as a fraction of the inlet pressure
+  (``physics.pressure_inlet``, the model's aortic pressure); and the same over the vessels of
+  :data:`PUBLISHED_PRESSURES`' diameters, beside the published fractions. Every fine terminal's
+  pressure is in the tree's CSV and VTP export (column ``pressure_Pa``).
+- **Territories**: per annealed terminal t, its subtree's flow Q_t, the pressure P_t at t, the
+  mean P̄_t and the lowest of its fine terminals' pressures, its **lumped resistance**
+  R_t = (P_t − P̄_t) / Q_t and, for comparison, the series-parallel resistance of its vessels
+  with every fine terminal at one pressure (R_network; differs from R_t because the model fixes
+  every fine terminal's flow at Q0 / N instead of their pressures).
+- **0D network** (``extend.zerod``): ``lumped`` (default), one ``BloodVessel`` per annealed
+  segment as in a run's network and per territory one more vessel ``territory<t>`` of resistance
+  R_t from the annealed terminal to a ``PRESSURE`` outlet at P̄_t; or ``full``, every vessel of
+  the whole tree with a ``PRESSURE`` outlet at every fine terminal. Either network carries the
+  model's inlet flows, so its solution gives the inlets the model's pressure and every
+  territory its flow Q_t (tests: against the full tree's Poiseuille solution, by svZeroDSolver
+  and by :func:`~vasc_pipeline.reduce.zerod.steady_solution`). The written network is checked
+  (:func:`~vasc_pipeline.reduce.zerod.solver_check`) by svZeroDSolver when it is installed and
+  the network has at most :data:`SVZEROD_MAX_VESSELS` vessels, else by ``steady_solution``.
+
+Writes ``<output_dir>/extended_summary.zarr`` (a DataTree beside ``summary.zarr``, so that the
+runs' summary and the whole trees' are written by their own stages; groups ``/morphometry``,
+``/comparison`` (a heart's), ``/pressure``, ``/anatomy``, ``/territory``, dim ``run_id``),
+``extended_comparison.csv`` (per run, reading, artery and order: model against Kassab and the
+pressures), ``trees/<run_id>.extended.{vtp,csv,0d.json}`` and ``figures/extended_*.png``.
+
+Published pressures (:data:`PUBLISHED_PRESSURES`), source lines:
+
+- Chilian WM, Eastham CL, Marcus ML (1986) Microvascular distribution of coronary vascular
+  resistance in beating left ventricle. Am J Physiol 251:H779-H788 (cat).
+- Chilian WM, Layne SM, Klausner EC, Eastham CL, Marcus ML (1989) Redistribution of coronary
+  microvascular resistance produced by dipyridamole. Am J Physiol 256:H383-H390 (dog).
+
+The numbers, about 60-80 % of aortic pressure in coronary arterioles of about 100-170 µm, are
+those papers' as summarised in the request that asked for this comparison; they were not read
+again from the papers here.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from ..config.schema import EXTEND_ZERODS as ZERODS
+from ..model.costs import Poiseuille, poiseuille
+from ..model.physics import Physics
+from ..model.topology import (
+    KIND_TERMINAL,
+    KIND_TERRITORY_ROOT,
+    _levels,
+    _pointer_jump_root,
+    kept_tree,
+    path_sums,
+)
+from ..store.extended import ExtendedStore
+from ..store.layout import (
+    EXTENDED_COMPARISON_CSV,
+    EXTENDED_DIR,
+    EXTENDED_SUMMARY_NAME,
+    TREES_DIR,
+    run_path,
+)
+from ..store.run_store import STATUS_COMPLETE, RunStore, StoreError
+from . import morphometry as _m
+from .anatomy import anatomy
+from .ordering import READINGS
+from .summary import write_summary
+
+__all__ = [
+    "PUBLISHED_PRESSURES",
+    "SVZEROD_MAX_VESSELS",
+    "ZERODS",
+    "WholeTree",
+    "ExtendedReduction",
+    "extended_stores",
+    "read_whole_tree",
+    "territories",
+    "territory_table",
+    "lumped_network",
+    "full_network",
+    "pressures_by_order",
+    "reduce_whole_tree",
+    "reduce_extended",
+    "extended_export_name",
+    "PRESSURE_META",
+    "TERRITORY_META",
+]
+
+# The largest 0D network svZeroDSolver checks; a larger one is checked by zerod.steady_solution
+# (svZeroDSolver took 30-47 s for 18 000 vessels on a busy machine, more than 19 minutes for 210 000)
+SVZEROD_MAX_VESSELS = 50_000
+# Published pressures in coronary arterioles as a fraction of aortic pressure (module docstring:
+# the source lines, and where the numbers are from).
+PUBLISHED_PRESSURES = {
+    "diameter_min": 100e-6,  # m
+    "diameter_max": 170e-6,  # m
+    "fraction_min": 0.60,
+    "fraction_max": 0.80,
+    "source": "Chilian, Eastham & Marcus 1986, Am J Physiol 251:H779-H788 (cat); Chilian, Layne, Klausner, "
+    "Eastham & Marcus 1989, Am J Physiol 256:H383-H390 (dog): about 60-80 % of aortic pressure in coronary "
+    "arterioles of about 100-170 um (as summarised in the request for this comparison, not read again here)",
+}
+
+
+@dataclass
+class WholeTree:
+    """An extended store's whole tree with what its reduction needs (SI)."""
+
+    run_id: str
+    path: Path
+    parent: np.ndarray
+    position: np.ndarray
+    radius: np.ndarray
+    kind: np.ndarray
+    physics: Physics  # the whole tree's: N = the fine terminals
+    attrs: dict[str, Any]
+    source: Path | None  # the run store it was grown below (tissue, inlet names), if still there
+    inlet_names: tuple[str, ...]
+    organ: str  # "heart" (compared with Kassab) or "other": the source run's tissue.organ
+
+
+@dataclass
+class ExtendedReduction:
+    """What :func:`reduce_extended` produced."""
+
+    output_dir: Path
+    summary: xr.DataTree | None
+    summary_path: Path | None
+    comparison_csv: Path | None
+    zerod: str
+    trees: list[Path] = field(default_factory=list)
+    figures: list[Path] = field(default_factory=list)  # drawn by the pipeline (reduce_and_draw)
+    skipped: dict[str, str] = field(default_factory=dict)  # store -> why it was not reduced
+    errors: dict[str, str] = field(default_factory=dict)  # stage -> error text
+    zero_d_check: dict[str, float] = field(default_factory=dict)  # run id -> the 0D solution's inlet deviation
+    zero_d_solver: dict[str, str] = field(default_factory=dict)  # run id -> which solver checked it
+    # run id -> wall seconds of its steps: "reduce" (morphometry, anatomy, pressures, territories),
+    # "exports" (VTP, CSV, 0D network), "solver_check" (svZeroDSolver)
+    seconds: dict[str, dict[str, float]] = field(default_factory=dict)
+
+
+def extended_export_name(run_id: str) -> str:
+    """The file stem of a whole tree's exports: ``<run_id>.extended``."""
+    return f"{run_id}.extended"
+
+
+def extended_stores(output_dir: str | os.PathLike) -> tuple[list[Path], dict[str, str]]:
+    """The complete, checksummed stores of ``<output_dir>/extended/`` and, for every other one,
+    why it is left out."""
+    root = Path(output_dir) / EXTENDED_DIR
+    found, skipped = [], {}
+    for path in sorted(root.glob("*.zarr")) if root.is_dir() else []:
+        try:
+            store = ExtendedStore.open(path)
+            if store.status != STATUS_COMPLETE:
+                skipped[str(path)] = (
+                    f"status {store.status!r}: {store.territories_done} of {store.attrs['n_territories']} territories "
+                    "grown (the same +stage=extend command resumes it)"
+                )
+                continue
+            store.verify()
+        except StoreError as exc:
+            skipped[str(path)] = str(exc)
+            continue
+        found.append(path)
+    return found, skipped
+
+
+def read_whole_tree(path: str | os.PathLike, output_dir: str | os.PathLike | None = None) -> WholeTree:
+    """An extended store's tree and physics, its source run (``<output_dir>/runs/<run_id>.zarr``,
+    else where it was when extended) for the inlet names and the organ."""
+    from ..config.schema import organ_of
+
+    store = ExtendedStore.open(path)
+    attrs = store.attrs
+    tree = store.read_tree()
+    run_id = str(attrs["run_id"])
+    candidates = [run_path(output_dir, run_id)] if output_dir is not None else []
+    candidates.append(Path((attrs.get("source") or {}).get("store", "")))
+    source = next((p for p in candidates if str(p) and (p / "zarr.json").is_file()), None)
+    physics = Physics(**attrs["physics"])
+    inlet_names: tuple[str, ...] = ()
+    organ = "heart"
+    if source is not None:
+        run = RunStore.open(source, mode="r")
+        inlet_names = tuple(run.group["tissue"].attrs.get("inlet_names", ()))
+        config = run.attrs.get("config") or {}
+        tissue = config.get("tissue") or {}
+        organ = organ_of(str(tissue.get("name")), tissue.get("organ"), physics.n_inlets)
+    return WholeTree(
+        run_id=run_id,
+        path=Path(path),
+        parent=np.asarray(tree["parent"], dtype=np.int64),
+        position=np.asarray(tree["position"], dtype=np.float64),
+        radius=np.asarray(tree["radius"], dtype=np.float64),
+        kind=np.asarray(tree["kind"], dtype=np.int8),
+        physics=physics,
+        attrs=attrs,
+        source=source,
+        inlet_names=inlet_names or tuple(f"inlet{i}" for i in range(physics.n_inlets)),
+        organ=organ,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Territories and their lumped resistances
+
+
+def territories(parent: np.ndarray, kind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(roots, territory): the pass-through nodes (the annealed terminals, in node order: root i
+    is territory i's) and, per node, the territory whose subtree holds it (its root included;
+    -1 for the annealed part above)."""
+    roots = np.flatnonzero(kind == KIND_TERRITORY_ROOT)
+    top = _pointer_jump_root(np.where((kind == KIND_TERRITORY_ROOT) | (parent < 0), np.arange(parent.size), parent))
+    territory = np.where(kind[top] == KIND_TERRITORY_ROOT, np.searchsorted(roots, top), -1)
+    return roots, territory
+
+
+def _equal_pressure_resistance(parent: np.ndarray, resistance: np.ndarray) -> np.ndarray:
+    """Per node, the resistance of the vessels below it when every terminal is at one pressure
+    (series and parallel, from the terminals up; 0 at a terminal)."""
+    conductance = np.zeros(parent.size)
+    below = np.zeros(parent.size)
+    for level in reversed(_levels(parent)):
+        fed = conductance[level] > 0
+        below[level[fed]] = 1.0 / conductance[level[fed]]
+        with np.errstate(divide="ignore"):  # a zero-length terminal segment: a short circuit, below = 0
+            np.add.at(conductance, parent[level], 1.0 / (resistance[level] + below[level]))
+    return below
+
+
+def territory_table(tree: WholeTree, solution: Poiseuille) -> pd.DataFrame:
+    """One row per territory: its root node, flow Q_t, pressure P_t at the root, its fine terminals'
+    mean P̄_t and lowest pressure, the lumped resistance R_t = (P_t − P̄_t) / Q_t, the
+    series-parallel resistance of its vessels (terminals at one pressure), and the mean path
+    length from the root to its fine terminals (SI)."""
+    roots, territory = territories(tree.parent, tree.kind)
+    fine = np.flatnonzero((tree.kind == KIND_TERMINAL) & (territory >= 0))
+    label = territory[fine]
+    count = np.bincount(label, minlength=roots.size)
+    p = solution.pressure
+    mean = np.bincount(label, weights=p[fine], minlength=roots.size) / np.maximum(count, 1)
+    lowest = np.full(roots.size, np.inf)
+    np.minimum.at(lowest, label, p[fine])
+    path = path_sums(tree.parent, solution.length)
+    depth = np.bincount(label, weights=path[fine], minlength=roots.size) / np.maximum(count, 1) - path[roots]
+    flow = solution.flow[roots]
+    return pd.DataFrame(
+        {
+            "node": roots,
+            "fine_terminals": count,
+            "flow": flow,
+            "pressure_root": p[roots],
+            "pressure_terminal_mean": mean,
+            "pressure_terminal_min": lowest,
+            "resistance_lumped": (p[roots] - mean) / flow,
+            "resistance_network": _equal_pressure_resistance(tree.parent, solution.resistance)[roots],
+            "path_length_mean": depth,
+        }
+    )
+
+
+TERRITORY_META = {
+    "node": ("1", "the annealed terminal (node) at the territory's root"),
+    "fine_terminals": ("1", "fine terminals of the territory"),
+    "flow": ("m3 s-1", "flow into the territory's subtree, Q_t"),
+    "pressure_root": ("Pa", "pressure at the annealed terminal, P_t"),
+    "pressure_terminal_mean": ("Pa", "mean pressure of the territory's fine terminals"),
+    "pressure_terminal_min": ("Pa", "lowest pressure of the territory's fine terminals"),
+    "resistance_lumped": ("Pa s m-3", "lumped resistance (P_t - mean fine terminal pressure) / Q_t"),
+    "resistance_network": ("Pa s m-3", "series-parallel resistance of the subtree, its terminals at one pressure"),
+    "path_length_mean": ("m", "mean path length from the annealed terminal to a fine terminal"),
+}
+
+
+def lumped_network(tree: WholeTree, solution: Poiseuille, table: pd.DataFrame | None = None) -> dict:
+    """The whole tree's 0D network with every territory's subtree one lumped resistance (module
+    docstring): the annealed part's vessels, and per territory ``territory<root node>``."""
+    from .zerod import Lumped, network
+
+    table = territory_table(tree, solution) if table is None else table
+    _, territory = territories(tree.parent, tree.kind)
+    keep = np.flatnonzero((territory < 0) | (tree.kind == KIND_TERRITORY_ROOT))  # the annealed part
+    parent = kept_tree(tree.parent, keep)
+    roots = table["node"].to_numpy()
+    lumped = Lumped(
+        node=np.searchsorted(keep, roots),
+        name=[f"territory{r}" for r in roots.tolist()],
+        resistance=table["resistance_lumped"].to_numpy(),
+        length=table["path_length_mean"].to_numpy(),
+        pressure=table["pressure_terminal_mean"].to_numpy(),
+    )
+    s = solution
+    model = network(
+        parent, s.length[keep], s.resistance[keep], s.flow[keep], s.pressure[keep], tree.inlet_names, lumped
+    )
+    model["description"]["description"] = (
+        "vasc_pipeline whole tree, lumped: the annealed tree's Poiseuille vessels; below every annealed terminal "
+        "one vessel territory<node> of resistance (P_t - mean fine terminal pressure) / Q_t to that mean pressure"
+    )
+    return model
+
+
+def full_network(tree: WholeTree, solution: Poiseuille) -> dict:
+    """The whole tree's 0D network with every vessel, a ``PRESSURE`` outlet at every fine terminal."""
+    from .zerod import network
+
+    s = solution
+    return network(tree.parent, s.length, s.resistance, s.flow, s.pressure, tree.inlet_names)
+
+
+# --------------------------------------------------------------------------------------------
+# Pressures by order
+
+
+PRESSURE_META = {
+    "pressure_mean": ("Pa", "mean pressure along the order's vessels (length-weighted)"),
+    "pressure_min": ("Pa", "lowest pressure in the order's vessels (at a distal end)"),
+    "pressure_max": ("Pa", "highest pressure in the order's vessels (at a proximal end)"),
+    "pressure_mean_fraction": ("1", "mean pressure along the order's vessels over the inlet pressure"),
+    "pressure_min_fraction": ("1", "lowest pressure in the order's vessels over the inlet pressure"),
+    "diameter_min": ("m", "smallest segment diameter of the order"),
+    "diameter_max": ("m", "largest segment diameter of the order"),
+    "vessel_length": ("m", "total length of the order's vessels"),
+}
+
+
+def _pressure_stats(select: np.ndarray, groups: np.ndarray, levels: np.ndarray, tree, solution) -> dict:
+    """Per group (of ``levels``) of the segments ``select`` (child nodes): the PRESSURE_META values."""
+    parent, p = tree.parent, solution.pressure
+    seg = select
+    index = np.searchsorted(levels, groups)
+    m = levels.size
+    length = solution.length[seg]
+    along = 0.5 * (p[seg] + p[parent[seg]]) * length  # a uniform vessel's pressure falls linearly along it
+    total = np.bincount(index, weights=length, minlength=m)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.bincount(index, weights=along, minlength=m) / total
+    out = {"pressure_mean": mean}
+    for name, values, fill, reduce in (
+        ("pressure_min", p[seg], np.inf, np.minimum),
+        ("pressure_max", p[parent[seg]], -np.inf, np.maximum),
+        ("diameter_min", 2.0 * tree.radius[seg], np.inf, np.minimum),
+        ("diameter_max", 2.0 * tree.radius[seg], -np.inf, np.maximum),
+    ):
+        acc = np.full(m, fill)
+        reduce.at(acc, index, values)
+        out[name] = np.where(np.isfinite(acc), acc, np.nan)
+    out["pressure_mean_fraction"] = out["pressure_mean"] / tree.physics.pressure_inlet
+    out["pressure_min_fraction"] = out["pressure_min"] / tree.physics.pressure_inlet
+    out["vessel_length"] = total
+    return out
+
+
+def pressures_by_order(tree: WholeTree, solution: Poiseuille, segment_order: np.ndarray, orders) -> xr.Dataset:
+    """Pressures (``PRESSURE_META``) per diameter-defined order (dim ``order``) from the
+    node-indexed ``segment_order`` of a morphometry (0: a contracted segment, left out)."""
+    orders = np.asarray(orders, dtype=np.int64)
+    seg = np.flatnonzero((tree.parent >= 0) & np.isin(segment_order, orders))
+    values = _pressure_stats(seg, segment_order[seg], orders, tree, solution)
+    data = {
+        k: ("order", v, {"units": PRESSURE_META[k][0], "long_name": PRESSURE_META[k][1]}) for k, v in values.items()
+    }
+    return xr.Dataset(data, coords={"order": ("order", orders, {"long_name": "vessel order", "units": "1"})})
+
+
+def published_band(tree: WholeTree, solution: Poiseuille) -> dict[str, float]:
+    """The pressures of the vessels with a diameter in :data:`PUBLISHED_PRESSURES`' range."""
+    d = 2.0 * tree.radius
+    band = PUBLISHED_PRESSURES
+    seg = np.flatnonzero((tree.parent >= 0) & (d >= band["diameter_min"]) & (d <= band["diameter_max"]))
+    values = _pressure_stats(seg, np.zeros(seg.size, np.int64), np.zeros(1, np.int64), tree, solution)
+    return {f"band_{k}": float(v[0]) for k, v in values.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# One whole tree
+
+
+@dataclass
+class WholeTreeResult:
+    """:func:`reduce_whole_tree`'s datasets (no node dim) and what the exports need."""
+
+    tree: WholeTree
+    solution: Poiseuille
+    morphometry: xr.Dataset  # (reading, scheme, order)
+    segment_orders: dict[str, np.ndarray]  # reading -> diameter-defined / Strahler node orders (range)
+    pressure: xr.Dataset  # (reading, order)
+    anatomy: dict[str, float]
+    territory: pd.DataFrame
+    seconds: float
+
+
+def reduce_whole_tree(path: str | os.PathLike, output_dir: str | os.PathLike | None = None) -> WholeTreeResult:
+    """Morphometry (both readings), anatomy, pressures by order and territories of one extended store."""
+    started = time.monotonic()
+    tree = read_whole_tree(path, output_dir)
+    solution = poiseuille(tree.parent, tree.position, tree.physics)
+    parts, pressure, orders_of = [], [], {}
+    for reading in READINGS:
+        ds = _m.morphometry(tree.parent, tree.position, tree.radius, tree.kind, reading=reading)
+        order = ds.segment_order.sel(scheme="diameter_defined").values
+        orders_of[reading] = order
+        if reading == READINGS[0]:
+            orders_of["strahler"] = ds.segment_order.sel(scheme="strahler").values
+        pressure.append(pressures_by_order(tree, solution, order, ds.order.values))
+        dds = {"dds_iterations": int(ds.attrs["dds_iterations"]), "dds_converged": int(ds.attrs["dds_converged"])}
+        ds = ds.drop_dims("node")
+        for name, value in dds.items():
+            ds[name] = ((), value, {"units": "1", "long_name": name.replace("_", " ")})
+        ds.attrs = {}
+        parts.append(ds)
+    reading_dim = xr.DataArray(list(READINGS), dims="reading", name="reading")
+    morph = _counts_as_ints(xr.concat(parts, dim=reading_dim, join="outer"))
+    pressure_ds = xr.concat(pressure, dim=reading_dim, join="outer")
+    organ = voxel = origin = None
+    if tree.source is not None:
+        tissue = RunStore.open(tree.source, mode="r").group["tissue"]
+        organ = tissue["exclusion"][...] > 0
+        voxel, origin = float(tissue.attrs["voxel_size"]), np.asarray(tissue.attrs["origin"], dtype=np.float64)
+    found = anatomy(
+        tree.parent, tree.position, tree.radius, tree.kind, tree.physics, tree.inlet_names, organ, voxel, origin
+    )
+    found.update(published_band(tree, solution))
+    table = territory_table(tree, solution)
+    found["lumped_over_network_median"] = float(np.median(table.resistance_lumped / table.resistance_network))
+    return WholeTreeResult(tree, solution, morph, orders_of, pressure_ds, found, table, time.monotonic() - started)
+
+
+def _counts_as_ints(ds: xr.Dataset) -> xr.Dataset:
+    for name, var in ds.data_vars.items():  # an outer join turns absent counts into NaN: back to 0
+        if name.endswith("_count"):
+            ds[name] = var.fillna(0).astype(np.int64)
+    return ds
+
+
+# --------------------------------------------------------------------------------------------
+# The stage
+
+
+def _export(result: WholeTreeResult, trees: Path, zerod: str) -> tuple[list[Path], dict]:
+    """``trees/<run_id>.extended.{vtp,csv,0d.json}``; returns the paths and the 0D network."""
+    from .export import export_paths, tree_table, write_csv, write_vtp
+    from .zerod import write_zero_d, zero_d_path
+
+    tree, s = result.tree, result.solution
+    name = extended_export_name(tree.run_id)
+    trees.mkdir(parents=True, exist_ok=True)
+    table = tree_table(
+        tree.parent,
+        tree.position,
+        tree.radius,
+        tree.kind,
+        total_flow=tree.physics.total_flow,
+        orders=result.segment_orders["range"],
+        strahler=result.segment_orders["strahler"],
+    )
+    table["pressure_Pa"] = s.pressure
+    vtp, csv = export_paths(trees, name)
+    paths = [write_vtp(vtp, table), write_csv(csv, table)]
+    del table
+    model = lumped_network(tree, s, result.territory) if zerod == "lumped" else full_network(tree, s)
+    paths.append(write_zero_d(zero_d_path(trees, name), model))
+    return paths, model
+
+
+def reduce_extended(
+    output_dir: str | os.PathLike,
+    *,
+    zerod: str = "lumped",
+    exports: bool = True,
+    stream: TextIO | None = None,
+) -> ExtendedReduction:
+    """Reduce every complete store of ``<output_dir>/extended/`` (module docstring).
+
+    Parameters
+    ----------
+    output_dir : path
+    zerod : {"lumped", "full"}
+        The 0D network written (``extend.zerod``).
+    exports : bool
+        Write ``trees/<run_id>.extended.*``. The figures (``figures/extended_*.png``) are drawn from
+        the result by :func:`vasc_pipeline.figures.extended.draw_extended`.
+    stream : text stream, optional
+        Where the table and the outputs are printed (default stdout).
+
+    Returns
+    -------
+    ExtendedReduction
+        ``summary`` None when no store is complete (nothing is written then). A failure in one
+        tree's reduction or its exports is reported in ``errors``; the others go on.
+    """
+    if zerod not in ZERODS:
+        raise ValueError(f"extend.zerod must be one of {', '.join(ZERODS)}, got {zerod!r}")
+    stream = stream or sys.stdout
+    out = Path(output_dir)
+    paths, skipped = extended_stores(out)
+    result = ExtendedReduction(out, None, None, None, zerod, skipped=skipped)
+    from .extended_summary import Reduced, build_extended_summary, comparison_frame, format_extended
+    from .zerod import solver_check
+
+    reduced: list[Reduced] = []
+    for path in paths:
+        try:
+            whole = reduce_whole_tree(path, out)
+        except Exception as exc:  # one tree's failure must not hide the others'
+            result.errors[f"reduce {path.name}"] = f"{type(exc).__name__}: {exc}"
+            continue
+        run_id = whole.tree.run_id
+        seconds = result.seconds[run_id] = {"reduce": whole.seconds}
+        table = whole.territory
+        if exports:
+            try:
+                started = time.monotonic()
+                written, model = _export(whole, out / TREES_DIR, zerod)
+                result.trees.extend(written)
+                seconds["exports"] = time.monotonic() - started
+                p_in, small = whole.tree.physics.pressure_inlet, len(model["vessels"]) <= SVZEROD_MAX_VESSELS
+                deviation = solver_check(model, p_in) if small else None
+                result.zero_d_solver[run_id] = "svZeroDSolver"
+                if deviation is None:  # too large for svZeroDSolver's time, or not installed
+                    deviation = solver_check(model, p_in, solver="numpy")
+                    result.zero_d_solver[run_id] = "steady_solution (NumPy)"
+                seconds["solver_check"] = time.monotonic() - started - seconds["exports"]
+                del model
+                result.zero_d_check[run_id] = deviation
+            except Exception as exc:
+                result.errors[f"exports {run_id}"] = f"{type(exc).__name__}: {exc}"
+        t = whole.tree
+        reduced.append(Reduced(run_id, t.organ, t.physics, whole.morphometry, whole.pressure, whole.anatomy, table))
+        del whole
+    if not reduced:
+        _report(result, stream)
+        return result
+    result.summary = build_extended_summary(reduced, out, zerod)
+    result.summary_path = write_summary(result.summary, out / EXTENDED_SUMMARY_NAME)
+    frame = comparison_frame(result.summary)
+    tmp = out / f".{EXTENDED_COMPARISON_CSV}.tmp-{os.getpid()}"
+    frame.to_csv(tmp, index=False, float_format="%.6g")
+    os.replace(tmp, out / EXTENDED_COMPARISON_CSV)
+    result.comparison_csv = out / EXTENDED_COMPARISON_CSV
+    stream.write(format_extended(result.summary) + "\n")
+    _report(result, stream)
+    return result
+
+
+def _report(result: ExtendedReduction, stream: TextIO) -> None:
+    out = result.output_dir
+    n = len(result.seconds)
+    lines = [f"vasc_pipeline: reduced {n} whole tree{'' if n == 1 else 's'} of {out / EXTENDED_DIR}"]
+    if result.summary_path is not None:
+        lines.append(f"  summary: {result.summary_path}; table: {result.comparison_csv}")
+    if result.trees:
+        lines.append(
+            f"  trees: {len(result.trees)} files in {out / TREES_DIR} (<run_id>.extended.vtp, .csv, .0d.json: "
+            f"{result.zerod})"
+        )
+    for run_id, deviation in result.zero_d_check.items():
+        lines.append(
+            f"  0D check: {result.zero_d_solver[run_id]} gives {run_id}'s network the inlet pressure to "
+            f"{deviation:.1e} (relative)"
+        )
+    for path, why in result.skipped.items():
+        lines.append(f"  left out: {path}: {why}")
+    for stage, error in result.errors.items():
+        lines.append(f"  {stage} FAILED: {error}")
+    stream.write("\n".join(lines) + "\n")
+    stream.flush()
