@@ -23,6 +23,7 @@ from .schema import (  # the former config module's other names, outside its __a
     ANNEAL_INITS,
     CONFIG_DIR,
     EXTEND_RUNS,
+    EXTEND_ZERODS,
     GAMMA_RANGE,
     HEART_EXCLUSION_VOXEL_SIZE,
     INLET_ASSIGNMENTS,
@@ -63,6 +64,7 @@ from .schema import (  # the former config module's other names, outside its __a
 
 __all__ = [
     "EXTEND_RUNS",
+    "EXTEND_ZERODS",
     "ConfigError",
     "KEYS_ADDED_LATER",
     "TissueConfig",

@@ -93,6 +93,16 @@ from ..store.layout import (
 from ..store.run_store import STATUS_COMPLETE, RunStore, StoreError
 from . import morphometry as _m
 from .anatomy import anatomy
+from .extended_summary import (
+    PRESSURE_META,
+    PUBLISHED_PRESSURES,
+    TERRITORY_META,
+    Reduced,
+    build_extended_summary,
+    comparison_frame,
+    counts_as_ints,
+    format_extended,
+)
 from .ordering import READINGS
 from .summary import write_summary
 
@@ -119,17 +129,6 @@ __all__ = [
 # The largest 0D network svZeroDSolver checks; a larger one is checked by zerod.steady_solution
 # (svZeroDSolver took 30-47 s for 18 000 vessels on a busy machine, more than 19 minutes for 210 000)
 SVZEROD_MAX_VESSELS = 50_000
-# Published pressures in coronary arterioles as a fraction of aortic pressure (module docstring:
-# the source lines, and where the numbers are from).
-PUBLISHED_PRESSURES = {
-    "diameter_min": 100e-6,  # m
-    "diameter_max": 170e-6,  # m
-    "fraction_min": 0.60,
-    "fraction_max": 0.80,
-    "source": "Chilian, Eastham & Marcus 1986, Am J Physiol 251:H779-H788 (cat); Chilian, Layne, Klausner, "
-    "Eastham & Marcus 1989, Am J Physiol 256:H383-H390 (dog): about 60-80 % of aortic pressure in coronary "
-    "arterioles of about 100-170 um (as summarised in the request for this comparison, not read again here)",
-}
 
 
 @dataclass
@@ -290,19 +289,6 @@ def territory_table(tree: WholeTree, solution: Poiseuille) -> pd.DataFrame:
     )
 
 
-TERRITORY_META = {
-    "node": ("1", "the annealed terminal (node) at the territory's root"),
-    "fine_terminals": ("1", "fine terminals of the territory"),
-    "flow": ("m3 s-1", "flow into the territory's subtree, Q_t"),
-    "pressure_root": ("Pa", "pressure at the annealed terminal, P_t"),
-    "pressure_terminal_mean": ("Pa", "mean pressure of the territory's fine terminals"),
-    "pressure_terminal_min": ("Pa", "lowest pressure of the territory's fine terminals"),
-    "resistance_lumped": ("Pa s m-3", "lumped resistance (P_t - mean fine terminal pressure) / Q_t"),
-    "resistance_network": ("Pa s m-3", "series-parallel resistance of the subtree, its terminals at one pressure"),
-    "path_length_mean": ("m", "mean path length from the annealed terminal to a fine terminal"),
-}
-
-
 def lumped_network(tree: WholeTree, solution: Poiseuille, table: pd.DataFrame | None = None) -> dict:
     """The whole tree's 0D network with every territory's subtree one lumped resistance (module
     docstring): the annealed part's vessels, and per territory ``territory<root node>``."""
@@ -341,18 +327,6 @@ def full_network(tree: WholeTree, solution: Poiseuille) -> dict:
 
 # --------------------------------------------------------------------------------------------
 # Pressures by order
-
-
-PRESSURE_META = {
-    "pressure_mean": ("Pa", "mean pressure along the order's vessels (length-weighted)"),
-    "pressure_min": ("Pa", "lowest pressure in the order's vessels (at a distal end)"),
-    "pressure_max": ("Pa", "highest pressure in the order's vessels (at a proximal end)"),
-    "pressure_mean_fraction": ("1", "mean pressure along the order's vessels over the inlet pressure"),
-    "pressure_min_fraction": ("1", "lowest pressure in the order's vessels over the inlet pressure"),
-    "diameter_min": ("m", "smallest segment diameter of the order"),
-    "diameter_max": ("m", "largest segment diameter of the order"),
-    "vessel_length": ("m", "total length of the order's vessels"),
-}
 
 
 def _pressure_stats(select: np.ndarray, groups: np.ndarray, levels: np.ndarray, tree, solution) -> dict:
@@ -441,7 +415,7 @@ def reduce_whole_tree(path: str | os.PathLike, output_dir: str | os.PathLike | N
         ds.attrs = {}
         parts.append(ds)
     reading_dim = xr.DataArray(list(READINGS), dims="reading", name="reading")
-    morph = _counts_as_ints(xr.concat(parts, dim=reading_dim, join="outer"))
+    morph = counts_as_ints(xr.concat(parts, dim=reading_dim, join="outer"))
     pressure_ds = xr.concat(pressure, dim=reading_dim, join="outer")
     organ = voxel = origin = None
     if tree.source is not None:
@@ -455,13 +429,6 @@ def reduce_whole_tree(path: str | os.PathLike, output_dir: str | os.PathLike | N
     table = territory_table(tree, solution)
     found["lumped_over_network_median"] = float(np.median(table.resistance_lumped / table.resistance_network))
     return WholeTreeResult(tree, solution, morph, orders_of, pressure_ds, found, table, time.monotonic() - started)
-
-
-def _counts_as_ints(ds: xr.Dataset) -> xr.Dataset:
-    for name, var in ds.data_vars.items():  # an outer join turns absent counts into NaN: back to 0
-        if name.endswith("_count"):
-            ds[name] = var.fillna(0).astype(np.int64)
-    return ds
 
 
 # --------------------------------------------------------------------------------------------
@@ -526,7 +493,6 @@ def reduce_extended(
     out = Path(output_dir)
     paths, skipped = extended_stores(out)
     result = ExtendedReduction(out, None, None, None, zerod, skipped=skipped)
-    from .extended_summary import Reduced, build_extended_summary, comparison_frame, format_extended
     from .zerod import solver_check
 
     reduced: list[Reduced] = []

@@ -10,7 +10,7 @@ Groups of the DataTree, dim ``run_id`` (the run below which a whole tree was gro
 - ``/comparison`` (run_id, reading, artery, order) and (run_id, reading, artery): against Kassab
   et al. 1993, element level (a heart's trees only);
 - ``/pressure`` (run_id, reading, order): the pressures along each order's vessels
-  (:data:`~vasc_pipeline.reduce.extended.PRESSURE_META`), the published values in its attrs;
+  (:data:`PRESSURE_META`), the published values in its attrs;
 - ``/anatomy`` (run_id) and (run_id, inlet): :func:`~vasc_pipeline.reduce.anatomy.anatomy` of the
   whole tree (fine terminals' pressures, crown exponents), the vessels of the published
   diameters, the fine count;
@@ -31,10 +31,52 @@ import xarray as xr
 from ..model.physics import Physics
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, MMHG
-from .extended import PRESSURE_META, PUBLISHED_PRESSURES, TERRITORY_META, _counts_as_ints
 from .ordering import READINGS
 from .reference import ARTERIES, kassab_dataset
 from .summary import _comparison_part
+
+# Published pressures in coronary arterioles as a fraction of aortic pressure (module docstring:
+# the source lines, and where the numbers are from).
+PUBLISHED_PRESSURES = {
+    "diameter_min": 100e-6,  # m
+    "diameter_max": 170e-6,  # m
+    "fraction_min": 0.60,
+    "fraction_max": 0.80,
+    "source": "Chilian, Eastham & Marcus 1986, Am J Physiol 251:H779-H788 (cat); Chilian, Layne, Klausner, "
+    "Eastham & Marcus 1989, Am J Physiol 256:H383-H390 (dog): about 60-80 % of aortic pressure in coronary "
+    "arterioles of about 100-170 um (as summarised in the request for this comparison, not read again here)",
+}
+
+TERRITORY_META = {
+    "node": ("1", "the annealed terminal (node) at the territory's root"),
+    "fine_terminals": ("1", "fine terminals of the territory"),
+    "flow": ("m3 s-1", "flow into the territory's subtree, Q_t"),
+    "pressure_root": ("Pa", "pressure at the annealed terminal, P_t"),
+    "pressure_terminal_mean": ("Pa", "mean pressure of the territory's fine terminals"),
+    "pressure_terminal_min": ("Pa", "lowest pressure of the territory's fine terminals"),
+    "resistance_lumped": ("Pa s m-3", "lumped resistance (P_t - mean fine terminal pressure) / Q_t"),
+    "resistance_network": ("Pa s m-3", "series-parallel resistance of the subtree, its terminals at one pressure"),
+    "path_length_mean": ("m", "mean path length from the annealed terminal to a fine terminal"),
+}
+
+PRESSURE_META = {
+    "pressure_mean": ("Pa", "mean pressure along the order's vessels (length-weighted)"),
+    "pressure_min": ("Pa", "lowest pressure in the order's vessels (at a distal end)"),
+    "pressure_max": ("Pa", "highest pressure in the order's vessels (at a proximal end)"),
+    "pressure_mean_fraction": ("1", "mean pressure along the order's vessels over the inlet pressure"),
+    "pressure_min_fraction": ("1", "lowest pressure in the order's vessels over the inlet pressure"),
+    "diameter_min": ("m", "smallest segment diameter of the order"),
+    "diameter_max": ("m", "largest segment diameter of the order"),
+    "vessel_length": ("m", "total length of the order's vessels"),
+}
+
+
+def counts_as_ints(ds: xr.Dataset) -> xr.Dataset:
+    for name, var in ds.data_vars.items():  # an outer join turns absent counts into NaN: back to 0
+        if name.endswith("_count"):
+            ds[name] = var.fillna(0).astype(np.int64)
+    return ds
+
 
 __all__ = ["Reduced", "build_extended_summary", "comparison_frame", "format_extended"]
 
@@ -66,9 +108,7 @@ def build_extended_summary(reduced: list[Reduced], output_dir: Path, zerod: str)
     lo = min([1] + [int(r.morphometry.order.min()) for r in reduced])
     orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
     run_dim = xr.DataArray(np.array(run_ids, dtype=object), dims="run_id", name="run_id")
-    morph = _counts_as_ints(
-        xr.concat([r.morphometry.reindex(order=orders) for r in reduced], dim=run_dim, join="outer")
-    )
+    morph = counts_as_ints(xr.concat([r.morphometry.reindex(order=orders) for r in reduced], dim=run_dim, join="outer"))
     pressure = xr.concat([r.pressure.reindex(order=orders) for r in reduced], dim=run_dim, join="outer")
     pressure.attrs.update(
         title="Pressures along the whole tree's vessels by diameter-defined order (Poiseuille, from the inlet's)",

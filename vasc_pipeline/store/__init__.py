@@ -14,6 +14,7 @@ from .run_store import (
     TRACE_FIELDS,
     Checkpoint,
     CheckpointWarning,
+    GroupStore,
     RunStore,
     StoreDamaged,
     StoreError,
@@ -30,6 +31,7 @@ from .run_store import (
 
 __all__ = [
     "RunStore",
+    "GroupStore",
     "Checkpoint",
     "CheckpointWarning",
     "StoreError",

@@ -57,6 +57,7 @@ from .layout import RUNS_DIR, run_path
 
 __all__ = [
     "RunStore",
+    "GroupStore",
     "Checkpoint",
     "CheckpointWarning",
     "StoreError",
