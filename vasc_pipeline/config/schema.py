@@ -94,6 +94,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.labels": {"supply": None, "exclusion": None, "open": None},
     "tissue.inlets_path": None,
     "tissue.organ": None,
+    "tissue.demand_path": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -127,6 +128,7 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlets",
     "inlets_path",
     "organ",
+    "demand_path",
 )
 
 
@@ -162,6 +164,9 @@ class TissueConfig(Settings):
     base_cut: Optional[float] = None
     elongation: Optional[float] = None
     path: Optional[str] = None  # mask: .npy file or Zarr array
+    # Every tissue: a map of relative perfusion demand (> 0 in the tissue), quantised to the supply
+    # term's coverage targets (model.tissue.demand); None: one sphere per voxel everywhere.
+    demand_path: Optional[str] = None
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
     # Inlet positions [x, y, z], m (numbers; checked by validate): a mask's (required, or inlets_path), or
@@ -506,6 +511,8 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.tissue.inlets is not None and cfg.tissue.inlets_path:
         raise ConfigError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
     _check_labels(cfg.tissue.labels)
+    if cfg.tissue.demand_path is not None and not str(cfg.tissue.demand_path).strip():
+        raise ConfigError("tissue.demand_path must name a file (.npy, Zarr, NIfTI, NRRD), or be null, got ''")
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
