@@ -44,6 +44,7 @@ INPUT_FILES = {
     "tissue.path": "tissue.array",
     "tissue.exclusion_path": "tissue.exclusion_array",
     "tissue.inlets_path": None,
+    "tissue.cavity_paths": None,
     "tissue.demand_path": None,
     "terminals.path": None,
 }

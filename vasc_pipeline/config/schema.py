@@ -94,6 +94,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.labels": {"supply": None, "exclusion": None, "open": None},
     "tissue.inlets_path": None,
     "tissue.organ": None,
+    "tissue.cavity_paths": None,
+    "tissue.mesh_unit": "m",
     "tissue.demand_path": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
@@ -163,7 +165,9 @@ class TissueConfig(Settings):
     # LV's equator in LV half-lengths, None: 1/3; the factor on the long-axis lengths, None: 1
     base_cut: Optional[float] = None
     elongation: Optional[float] = None
-    path: Optional[str] = None  # mask: .npy file or Zarr array
+    path: Optional[str] = None  # mask: .npy file or Zarr array; surface: a closed surface (STL, OBJ, PLY, VTP)
+    cavity_paths: Optional[list[str]] = None  # surface: closed surfaces of cavities inside it (excluded, not supplied)
+    mesh_unit: str = "m"  # surface: the unit of the surface files' coordinates (m, cm, mm, um)
     # Every tissue: a map of relative perfusion demand (> 0 in the tissue), quantised to the supply
     # term's coverage targets (model.tissue.demand); None: one sphere per voxel everywhere.
     demand_path: Optional[str] = None
@@ -335,12 +339,13 @@ def organ_of(tissue: str, organ: Optional[str], n_inlets: int) -> str:
     arteries) or "other".
 
     Unset (None): a heart for ``tissue=heart`` and for the shapes (sphere, box, plane2d: the test
-    domains, reduced as stand-ins for the heart as they always were), and for a mask with two or
-    more inlets (the coronary ostia: a heart's label map); "other" for a mask with one inlet.
+    domains, reduced as stand-ins for the heart as they always were), and for a mask or surface with
+    two or more inlets (the coronary ostia: a heart's label map or surfaces); "other" for a mask or
+    surface with one inlet.
     """
     if organ is not None:
         return organ
-    return "other" if tissue == "mask" and n_inlets < 2 else "heart"
+    return "other" if tissue in ("mask", "surface") and n_inlets < 2 else "heart"
 
 
 def to_run_config(cfg: Any) -> RunConfig:
@@ -511,8 +516,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.tissue.inlets is not None and cfg.tissue.inlets_path:
         raise ConfigError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
     _check_labels(cfg.tissue.labels)
-    if cfg.tissue.demand_path is not None and not str(cfg.tissue.demand_path).strip():
-        raise ConfigError("tissue.demand_path must name a file (.npy, Zarr, NIfTI, NRRD), or be null, got ''")
+    _check_surface_keys(cfg.tissue)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
@@ -672,6 +676,23 @@ def _check_labels(labels: LabelsConfig) -> None:
             if v in seen:
                 raise ConfigError(f"tissue.labels: label {v} is both {seen[v]} and {role}; give each label one role")
             seen[v] = role
+
+
+def _check_surface_keys(tissue: TissueConfig) -> None:
+    """tissue.cavity_paths null or a non-empty list of paths, tissue.mesh_unit a known unit, and
+    tissue.demand_path null or a path (the files themselves are read, and refused, by the tissue)."""
+    from ..model.tissue.surfaces import MESH_UNITS
+
+    cavities = tissue.cavity_paths
+    if cavities is not None and (not cavities or not all(isinstance(c, str) and c.strip() for c in cavities)):
+        raise ConfigError(
+            "tissue.cavity_paths must be a non-empty list of closed surface files (STL, OBJ, PLY, VTP), or null, "
+            f"got {cavities!r}"
+        )
+    if tissue.mesh_unit not in MESH_UNITS:
+        raise ConfigError(f"tissue.mesh_unit must be one of {', '.join(MESH_UNITS)}, got {tissue.mesh_unit!r}")
+    if tissue.demand_path is not None and not str(tissue.demand_path).strip():
+        raise ConfigError("tissue.demand_path must name a file (.npy, Zarr, NIfTI, NRRD), or be null, got ''")
 
 
 def _check_segment_costs(cfg: RunConfig) -> None:

@@ -2,7 +2,8 @@
 
 :func:`build_tissue` returns a :class:`Tissue` for each named domain of :data:`TISSUES`:
 ``sphere``, ``box``, ``plane2d`` and ``mask`` (a user's array) from
-:mod:`~vasc_pipeline.model.tissue.shapes`, and ``heart``, the paper's coronary substrate, from
+:mod:`~vasc_pipeline.model.tissue.shapes`, ``surface`` (a user's closed surface meshes) from
+:mod:`~vasc_pipeline.model.tissue.surfaces`, and ``heart``, the paper's coronary substrate, from
 :mod:`~vasc_pipeline.model.tissue.heart`. Any of them may carry a perfusion demand map
 (:mod:`~vasc_pipeline.model.tissue.demand`). The voxel grid itself (the :class:`Tissue` class, its
 distance transform, :func:`voxelize`, :func:`default_voxel_size`) is
@@ -25,6 +26,7 @@ from .grid import (
     voxelize,
 )
 from .shapes import box, given_inlets, mask, plane2d, sphere
+from .surfaces import surface
 
 __all__ = [
     "Tissue",
@@ -43,11 +45,12 @@ TISSUES: dict[str, Callable[..., Tissue]] = {
     "sphere": sphere,
     "box": box,
     "mask": mask,
+    "surface": surface,
 }
 # The tissues drawn from shapes: on another grid they are voxelised anew (the user's mask is resampled).
-SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box")
+SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box", "surface")
 # The tissues with no inlets of their own: their builder takes tissue.inlets or tissue.inlets_path.
-OWN_INLETS_REQUIRED = ("mask",)
+OWN_INLETS_REQUIRED = ("mask", "surface")
 
 
 def build_tissue(
