@@ -7,7 +7,9 @@ where the two masks differ on the voxel heart's own grid; then, per seed, the fi
 on each (the default config, ``anneal=fast``) and the LCA's share of the terminals. The surface
 runs take the heart's voxel and exclusion grid (``tissue.voxel_size``, the heart group's
 ``tissue.exclusion_voxel_size``), so that the tissues differ only in the voxels the surfaces
-place otherwise and in the heart's open base.
+place otherwise and in the heart's open base; a third run per seed, ``heart_closed_base``, is
+the voxel heart with its base closed as the surfaces close it (its exclusion map computed without
+``Tissue.open_boundary``), which tells the two differences apart.
 
 Usage: python benchmarks/surface_heart.py [--sizes 200] [--seeds 0 1] [--steps N]
        python benchmarks/surface_heart.py --quick    # N = 20, 5000 moves, coarse surfaces (seconds)
@@ -16,14 +18,19 @@ Usage: python benchmarks/surface_heart.py [--sizes 200] [--seeds 0 1] [--steps N
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import importlib
 import json
 import tempfile
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
-from vasc_pipeline import config, engine, tissue
-from vasc_pipeline.model.tissue import surfaces
+from vasc_pipeline import config, engine, kernel, tissue
+from vasc_pipeline.model.tissue import grid, surfaces
+
+engine_run = importlib.import_module("vasc_pipeline.engine.run")  # the module: engine.run is its function
 
 
 def compare_grids(n: int, organ: Path, cavities: list[Path], inlets: Path) -> dict:
@@ -47,8 +54,24 @@ def compare_grids(n: int, organ: Path, cavities: list[Path], inlets: Path) -> di
     }
 
 
-def run_costs(overrides: list[str], seed: int) -> dict:
-    result = engine.run(config.compose(overrides), seed=seed)
+def closed_base(problem):
+    """``problem`` (the heart's) with its exclusion map computed as if the base plane were a surface."""
+    t = problem.tissue
+    h = t.exclusion_grid.voxel_size
+    twin = tissue.build_tissue("heart", problem.physics.n_terminals, voxel_size=h) if h != t.voxel_size else t
+    closed = grid.ExclusionGrid(grid.exclusion_distance(twin.exclusion, None, 3), twin.origin, h)
+    model = problem.model._replace(**kernel.exclusion_fields(closed))
+    coarse = problem.coarse_model
+    if coarse is not None:
+        factor = problem.config.anneal.coarse_exclusion_factor
+        coarse = model._replace(**kernel.exclusion_fields(closed.coarsened(factor)))
+    return dataclasses.replace(problem, model=model, coarse_model=coarse)
+
+
+def run_costs(overrides: list[str], seed: int, close_base: bool = False) -> dict:
+    build = engine_run.build_problem
+    with mock.patch.object(engine_run, "build_problem", (lambda c: closed_base(build(c))) if close_base else build):
+        result = engine.run(config.compose(overrides), seed=seed)
     n = result.tree.n_downstream[:2]
     c = result.costs
     return {
@@ -88,6 +111,7 @@ def main() -> None:
             for seed in args.seeds:
                 row[f"seed{seed}"] = {
                     "heart": run_costs([f"n_terminals={n}", *steps], seed),
+                    "heart_closed_base": run_costs([f"n_terminals={n}", *steps], seed, close_base=True),
                     "surface": run_costs([f"n_terminals={n}", *steps, *surface], seed),
                 }
             print(json.dumps(row), flush=True)
