@@ -11,6 +11,8 @@ from helpers import FAST_2026_12, assert_block_splits_bit_identical, assert_runn
 
 from vasc_pipeline import costs, engine, kernel
 
+NO_TARGET = np.zeros((0, 0, 0), dtype=np.uint8)  # the Model's coverage targets without a demand map
+
 
 def _counts(shape=(24, 26, 28), seed=0):
     """A count map with counts 0-3 in tissue and -1 (no tissue) in a slab and a random tenth."""
@@ -70,10 +72,10 @@ def _change_both_ways(supply, rho, shell, centre, old, new):
     change is the same over the bands the move reaches and over all of them."""
     reach = np.linalg.norm(old - centre) + np.linalg.norm(new - old) + 1e-6
     by_shell, by_rows = supply.copy(), supply.copy()
-    d_shell = kernel.supply._shell_change(by_shell, rho, *shell, reach, *old, *new, True)
-    d_rows = kernel.supply._sphere_rows(by_rows, rho, *old, *new, True)
+    d_shell = kernel.supply._shell_change(by_shell, NO_TARGET, rho, *shell, reach, *old, *new, True)
+    d_rows = kernel.supply._sphere_rows(by_rows, NO_TARGET, rho, *old, *new, True)
     np.testing.assert_array_equal(by_shell, by_rows)
-    assert d_shell == kernel.supply._shell_change(supply, rho, *shell, shell[2], *old, *new, False)
+    assert d_shell == kernel.supply._shell_change(supply, NO_TARGET, rho, *shell, shell[2], *old, *new, False)
     return d_shell, d_rows
 
 

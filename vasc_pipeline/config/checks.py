@@ -151,6 +151,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     if cfg.tissue.inlets is not None and cfg.tissue.inlets_path:
         raise ConfigError("tissue.inlets and tissue.inlets_path both give the inlets: set one of them")
     _check_labels(cfg.tissue.labels)
+    _check_surface_keys(cfg.tissue)
     p = cfg.physics
     for name in ("gamma", "inlet_radius", "total_flow", "viscosity", "A_wv"):
         _positive(f"physics.{name}", getattr(p, name))
@@ -395,3 +396,20 @@ def _validate_extend(e: ExtendConfig) -> None:
             f"extend.zerod must be one of {', '.join(EXTEND_ZERODS)} (the whole tree's 0D network: each territory's "
             f"subtree one lumped resistance, or every vessel), got {e.zerod!r}"
         )
+
+
+def _check_surface_keys(tissue: TissueConfig) -> None:
+    """tissue.cavity_paths null or a non-empty list of paths, tissue.mesh_unit a known unit, and
+    tissue.demand_path null or a path (the files themselves are read, and refused, by the tissue)."""
+    from ..model.tissue.surfaces import MESH_UNITS
+
+    cavities = tissue.cavity_paths
+    if cavities is not None and (not cavities or not all(isinstance(c, str) and c.strip() for c in cavities)):
+        raise ConfigError(
+            "tissue.cavity_paths must be a non-empty list of closed surface files (STL, OBJ, PLY, VTP), or null, "
+            f"got {cavities!r}"
+        )
+    if tissue.mesh_unit not in MESH_UNITS:
+        raise ConfigError(f"tissue.mesh_unit must be one of {', '.join(MESH_UNITS)}, got {tissue.mesh_unit!r}")
+    if tissue.demand_path is not None and not str(tissue.demand_path).strip():
+        raise ConfigError("tissue.demand_path must name a file (.npy, Zarr, NIfTI, NRRD), or be null, got ''")

@@ -37,12 +37,15 @@ SWEEP_AXES = ("n_terminals", "physics.m_b", "anneal.steps", "seed")
 # The input files a run reads (config key -> the key naming an array inside a Zarr group). Their
 # content is part of the run's identity: a stored config holds ``config[INPUTS]``, the SHA-256 of
 # each one set ({"tissue.path": "sha256:..."}), so a file overwritten under the same path is a
-# different run, refused like a changed key. Stores written before the digests existed have no
-# ``INPUTS`` section: their files' content is unknown, and they are compared without it.
+# different run, refused like a changed key. A key holding a list of files (tissue.cavity_paths)
+# has one digest per entry, "tissue.cavity_paths[i]". Stores written before the digests existed
+# have no ``INPUTS`` section: their files' content is unknown, and they are compared without it.
 INPUT_FILES = {
     "tissue.path": "tissue.array",
     "tissue.exclusion_path": "tissue.exclusion_array",
     "tissue.inlets_path": None,
+    "tissue.cavity_paths": None,
+    "tissue.demand_path": None,
     "terminals.path": None,
 }
 INPUTS = "inputs"
@@ -89,12 +92,24 @@ def input_digests(config: Mapping[str, Any]) -> dict[str, str]:
     """The content digest of every input file ``config`` names (:data:`INPUT_FILES`), by key."""
     out = {}
     for key, array_key in INPUT_FILES.items():
-        path = _get(config, key)
-        if path:
-            digest = _file_digest(str(path), _get(config, array_key) if array_key else None)
-            if digest is not None:
-                out[key] = digest
+        value = _get(config, key)
+        listed = isinstance(value, (list, tuple))
+        entries = [(f"{key}[{i}]", p) for i, p in enumerate(value)] if listed else [(key, value)]
+        for name, path in entries:
+            if path:
+                digest = _file_digest(str(path), _get(config, array_key) if array_key else None)
+                if digest is not None:
+                    out[name] = digest
     return out
+
+
+def _input_path(flat: Mapping[str, Any], key: str) -> Any:
+    """The path an input key names in a flattened config, "tissue.cavity_paths[1]" an entry of its list."""
+    if key.endswith("]") and "[" in key:
+        name, index = key[:-1].split("[")
+        values = flat.get(name)
+        return values[int(index)] if isinstance(values, (list, tuple)) and int(index) < len(values) else None
+    return flat.get(key)
 
 
 def _comparable(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> tuple[Mapping, Mapping]:
@@ -164,8 +179,9 @@ def config_differences(
     def line(k: str) -> str:
         if k.startswith(INPUTS + "."):  # a digest: the file named by the key
             key = k[len(INPUTS) + 1 :]
+            path = _input_path(b, key) or _input_path(a, key)
             return (
-                f"{key}: the content of {b.get(key, a.get(key))!r} differs from the file the stored run read "
+                f"{key}: the content of {path!r} differs from the file the stored run read "
                 f"(sha256 {str(a.get(k, '<absent>'))[7:19]}... stored vs {str(b.get(k, '<absent>'))[7:19]}... "
                 "now): the file was changed in place"
             )

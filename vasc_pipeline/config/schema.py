@@ -92,6 +92,9 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.labels": {"supply": None, "exclusion": None, "open": None},
     "tissue.inlets_path": None,
     "tissue.organ": None,
+    "tissue.cavity_paths": None,
+    "tissue.mesh_unit": "m",
+    "tissue.demand_path": None,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -125,6 +128,7 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlets",
     "inlets_path",
     "organ",
+    "demand_path",
 )
 
 
@@ -159,7 +163,12 @@ class TissueConfig(Settings):
     # LV's equator in LV half-lengths, None: 1/3; the factor on the long-axis lengths, None: 1
     base_cut: Optional[float] = None
     elongation: Optional[float] = None
-    path: Optional[str] = None  # mask: .npy file or Zarr array
+    path: Optional[str] = None  # mask: .npy file or Zarr array; surface: a closed surface (STL, OBJ, PLY, VTP)
+    cavity_paths: Optional[list[str]] = None  # surface: closed surfaces of cavities inside it (excluded, not supplied)
+    mesh_unit: str = "m"  # surface: the unit of the surface files' coordinates (m, cm, mm, um)
+    # Every tissue: a map of relative perfusion demand (> 0 in the tissue), quantised to the supply
+    # term's coverage targets (model.tissue.demand); None: one sphere per voxel everywhere.
+    demand_path: Optional[str] = None
     array: Optional[str] = None  # mask: array name inside a Zarr group
     origin: Optional[list[float]] = None  # mask: [x, y, z] of voxel [0, 0, 0] centre, m
     # Inlet positions [x, y, z], m (numbers; checked by validate): a mask's (required, or inlets_path), or
@@ -329,12 +338,13 @@ def organ_of(tissue: str, organ: Optional[str], n_inlets: int) -> str:
     arteries) or "other".
 
     Unset (None): a heart for ``tissue=heart`` and for the shapes (sphere, box, plane2d: the test
-    domains, reduced as stand-ins for the heart as they always were), and for a mask with two or
-    more inlets (the coronary ostia: a heart's label map); "other" for a mask with one inlet.
+    domains, reduced as stand-ins for the heart as they always were), and for a mask or surface with
+    two or more inlets (the coronary ostia: a heart's label map or surfaces); "other" for a mask or
+    surface with one inlet.
     """
     if organ is not None:
         return organ
-    return "other" if tissue == "mask" and n_inlets < 2 else "heart"
+    return "other" if tissue in ("mask", "surface") and n_inlets < 2 else "heart"
 
 
 def to_run_config(cfg: Any) -> RunConfig:

@@ -226,7 +226,9 @@ def part_model(model: kernel.Model, part: Part) -> kernel.Model:
             mask=_NO_GRID,
             fixed_inlet_counts=True,
             move_terminals=False,
+            supply_target=_NO_TARGET,
         )
+    target = model.supply_target
     return model._replace(
         n_inlets=part.n_inlets,
         n_terminals=part.n_terminals,
@@ -234,11 +236,13 @@ def part_model(model: kernel.Model, part: Part) -> kernel.Model:
         origin=model.origin + model.voxel_size * part.corner[::-1],
         bifurcation_region=np.zeros((0, 0, 0), dtype=np.uint8),  # its bifurcations are pseudo-inlets: fixed
         fixed_inlet_counts=True,
+        supply_target=np.ascontiguousarray(target[part.box]) if target.size else target,  # the box's, as the map
     )
 
 
-# The grid a part's kernel never reads (the tissue of a part whose terminals stay put).
+# The grid a part's kernel never reads (the tissue of a part whose terminals stay put), and its targets.
 _NO_GRID = np.zeros((1, 1, 1), dtype=np.uint8)
+_NO_TARGET = np.zeros((0, 0, 0), dtype=np.uint8)
 
 
 def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part: Part, rng: np.ndarray) -> kernel.State:

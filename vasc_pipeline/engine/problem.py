@@ -117,7 +117,8 @@ def build_problem(config: Any) -> Problem:
         total_flow=p.total_flow,
         m_b=p.m_b,
         viscosity=p.viscosity,
-        supply_radius=supply_radius(n, tissue.measure, tissue.ndim, cfg.tissue.q_required, p.total_flow),
+        # with a demand map the spheres fill the demand-weighted volume, sum of t_v voxel volumes
+        supply_radius=supply_radius(n, tissue.supply_measure, tissue.ndim, cfg.tissue.q_required, p.total_flow),
         r_cutoff=p.r_cutoff,
         A_wv=p.A_wv,
         A_o=p.A_o,
@@ -205,6 +206,11 @@ def build_problem(config: Any) -> Problem:
             np.zeros((0, 0, 0), dtype=np.uint8)
             if cfg.tissue.bifurcation_reach is None
             else tissue.bifurcation_region(cfg.tissue.bifurcation_reach)
+        ),
+        supply_target=(
+            np.zeros((0, 0, 0), dtype=np.uint8)
+            if tissue.supply_target is None
+            else np.ascontiguousarray(tissue.supply_target, dtype=np.uint8)
         ),
     )
     coarse_model, coarse_steps = None, 0

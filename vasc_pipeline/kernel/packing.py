@@ -147,7 +147,7 @@ def pack_block_reference(model, state, n_steps: int, tissue, supply_radius: floa
     """
     pos = state.position
     first, last = model.n_inlets, model.n_inlets + model.n_terminals
-    current = supply_cost(supply_counts(pos[first:last], tissue, supply_radius), tissue.mask)
+    current = supply_cost(supply_counts(pos[first:last], tissue, supply_radius), tissue.mask, tissue.supply_target)
     for _ in range(n_steps):
         step = int(state.counters[COUNTER_STEP])
         if step >= model.pack_steps:
@@ -164,7 +164,7 @@ def pack_block_reference(model, state, n_steps: int, tissue, supply_radius: floa
         if tissue.contains(new[None])[0]:
             trial = pos[first:last].copy()
             trial[i - first] = new
-            cost = supply_cost(supply_counts(trial, tissue, supply_radius), tissue.mask)
+            cost = supply_cost(supply_counts(trial, tissue, supply_radius), tissue.mask, tissue.supply_target)
             d = cost - current
             if d <= 0.0 or next_double(rng) < math.exp(-d / temp):
                 pos[i] = new

@@ -114,6 +114,8 @@ Model = namedtuple(
         # (PREFETCH_LEAD; 0: not at all; the same sums either way)
         "prefetch_supply",  # bool: prefetch the count map's rows under both spheres before a
         # terminal move's supply change is computed row by row (the same sums either way)
+        "supply_target",  # uint8 (nz, ny, nx): each tissue voxel's coverage target t (tissue.demand_path;
+        # s = 10 uncovered, else (b - t)^2); shape (0, 0, 0): t = 1 everywhere, read by no loop
     ],
 )
 

@@ -4,6 +4,11 @@ C_s = sum over tissue voxels of s(b), b the number of supply spheres covering th
 (s(0) = 10, s(b) = (b - 1)^2). A move's change is computed row by row over both spheres or,
 while a terminal stays near the centre of its shell, over the shell's voxels only (the same
 sums either way).
+
+With a demand map (``tissue.demand_path``) each voxel has a coverage target t in 1..4, the
+``Model``'s ``supply_target``, and s(b) = (b - t)^2 for b > 0. Without one that array is empty
+and the loops of t = 1 run, reading no target: a run without a map is the run before the map
+existed, in its trees and its speed.
 """
 
 from __future__ import annotations
@@ -116,14 +121,41 @@ def _loss_change(b):
 
 
 @jit_norc_inline
-def _range_change(supply, k, j, lo, hi, sign, write):
+def _gain_change_to(b, t):
+    """:func:`_gain_change` for a voxel of coverage target t: s(b) = (b - t)^2 for b > 0, s(0) = 10,
+    so s(b + 1) - s(b) = 2 (b - t) + 1 + (t^2 - 10) [b = 0]; equal to it at t = 1."""
+    return (2 * (b - t) + 1) + (t * t - 10) * (b == 0)
+
+
+@jit_norc_inline
+def _loss_change_to(b, t):
+    """:func:`_loss_change` for a voxel of coverage target t: s(b - 1) - s(b) = 1 - 2 (b - t) + (10 - t^2) [b = 1]."""
+    return (1 - 2 * (b - t)) + (10 - t * t) * (b == 1)
+
+
+@jit_norc_inline
+def _range_change(supply, target, k, j, lo, hi, sign, write):
     """C_s change when voxels lo..hi of row (k, j) gain ``sign`` (:func:`_gain_change`,
-    :func:`_loss_change`); non-tissue voxels hold -1 and contribute 0."""
+    :func:`_loss_change`, or with coverage targets ``target`` :func:`_gain_change_to`,
+    :func:`_loss_change_to`); non-tissue voxels hold -1 and contribute 0."""
     # The loops exit early on a count below -1 (none is): LLVM does not vectorise loops
     # with two exits, and these are a few voxels long, where a vectorised loop's set-up
     # and remainder cost more than they save (measured: -25 % time per supply delta).
     delta = 0
-    if sign > 0:
+    if target.shape[0] != 0:  # a demand map: each voxel's own target
+        if sign > 0:
+            for i in range(lo, hi + 1):
+                b = np.int64(supply[k, j, i])
+                if b < -1:
+                    break
+                delta += (b >= 0) * _gain_change_to(b, np.int64(target[k, j, i]))
+        else:
+            for i in range(lo, hi + 1):
+                b = np.int64(supply[k, j, i])
+                if b < -1:
+                    break
+                delta += (b >= 0) * _loss_change_to(b, np.int64(target[k, j, i]))
+    elif sign > 0:
         for i in range(lo, hi + 1):
             b = np.int64(supply[k, j, i])
             if b < -1:
@@ -143,12 +175,12 @@ def _range_change(supply, k, j, lo, hi, sign, write):
 
 
 @jit_norc_inline
-def _row_change(supply, k, j, lo, hi, other_lo, other_hi, sign, write):
+def _row_change(supply, target, k, j, lo, hi, other_lo, other_hi, sign, write):
     """C_s change when voxels lo..hi of row (k, j), except other_lo..other_hi, gain ``sign``."""
     if other_lo > other_hi or other_hi < lo or other_lo > hi:  # nothing to exclude
-        return _range_change(supply, k, j, lo, hi, sign, write)
-    return _range_change(supply, k, j, lo, other_lo - 1, sign, write) + _range_change(
-        supply, k, j, other_hi + 1, hi, sign, write
+        return _range_change(supply, target, k, j, lo, hi, sign, write)
+    return _range_change(supply, target, k, j, lo, other_lo - 1, sign, write) + _range_change(
+        supply, target, k, j, other_hi + 1, hi, sign, write
     )
 
 
@@ -161,11 +193,11 @@ def _sphere_change(model, supply, old, new, write):
     """
     ox, oy, oz = _voxel_coords(model, old[0], old[1], old[2])  # NaN stays NaN: absent
     nx_, ny_, nz_ = _voxel_coords(model, new[0], new[1], new[2])
-    return _sphere_rows(supply, model.supply_rho, ox, oy, oz, nx_, ny_, nz_, write)
+    return _sphere_rows(supply, model.supply_target, model.supply_rho, ox, oy, oz, nx_, ny_, nz_, write)
 
 
 @jit_norc
-def _sphere_rows(supply, rho, ox, oy, oz, nx_, ny_, nz_, write):
+def _sphere_rows(supply, target, rho, ox, oy, oz, nx_, ny_, nz_, write):
     """:func:`_sphere_change` on the spheres' centres in voxel coordinates: a call passes a
     few words, not the whole ``Model`` (numba passes a named tuple field by field)."""
     nz, ny, nx = supply.shape
@@ -204,9 +236,9 @@ def _sphere_rows(supply, rho, ox, oy, oz, nx_, ny_, nz_, write):
             if dn2 <= rho2:
                 n_lo, n_hi = _row_interval(nx_, (j - ny_) * (j - ny_), dn2, rho2, nx)
             if o_lo <= o_hi:
-                delta += _row_change(supply, k, j, o_lo, o_hi, n_lo, n_hi, -1, write)
+                delta += _row_change(supply, target, k, j, o_lo, o_hi, n_lo, n_hi, -1, write)
             if n_lo <= n_hi:
-                delta += _row_change(supply, k, j, n_lo, n_hi, o_lo, o_hi, 1, write)
+                delta += _row_change(supply, target, k, j, n_lo, n_hi, o_lo, o_hi, 1, write)
     return float(delta)
 
 
@@ -322,13 +354,15 @@ def _shell_build(supply, rho, cx, cy, cz, width, voxels, bands):
 
 
 @jit_norc
-def _shell_change(supply, rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write):
+def _shell_change(supply, target, rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write):
     """:func:`_sphere_rows` for a sphere moving from o to p (voxel coordinates) when no voxel
     can change coverage but those of the shell (``voxels``, ``bands``, ``width``) within
     ``reach`` of the surface: each voxel of the bands that reach is tested as the row code
-    tests a voxel (:func:`_inside`), and its count change is the rows' (:func:`_gain_change`, :func:`_loss_change`)."""
+    tests a voxel (:func:`_inside`), and its count change is the rows' (:func:`_gain_change`,
+    :func:`_loss_change`, or with coverage targets :func:`_gain_change_to`, :func:`_loss_change_to`)."""
     rho2 = rho * rho
     n_bands = bands.size
+    targets = target.shape[0] != 0
     delta = 0
     first = 0
     for band in range(n_bands):
@@ -343,7 +377,11 @@ def _shell_change(supply, rho, voxels, bands, width, reach, ox, oy, oz, px, py, 
             if was == now:
                 continue
             b = np.int64(supply[k, j, i])
-            delta += _gain_change(b) if now else _loss_change(b)
+            if targets:
+                t = np.int64(target[k, j, i])
+                delta += _gain_change_to(b, t) if now else _loss_change_to(b, t)
+            else:
+                delta += _gain_change(b) if now else _loss_change(b)
             if write:
                 supply[k, j, i] += 1 if now else -1
         first = bands[band]
@@ -393,11 +431,12 @@ def _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, writ
             state.scratch_shell_bands[t],
             state.scratch_shell_frame[t, 3],
         )
-        return _shell_change(state.supply, model.supply_rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write)
+        target, rho = model.supply_target, model.supply_rho
+        return _shell_change(state.supply, target, rho, voxels, bands, width, reach, ox, oy, oz, px, py, pz, write)
     if model.prefetch_supply and not write:  # the rows' cache misses in flight together, not one by one
         _prefetch_sphere(state.supply, model.supply_rho, ox, oy, oz)
         _prefetch_sphere(state.supply, model.supply_rho, px, py, pz)
-    return _sphere_rows(state.supply, model.supply_rho, ox, oy, oz, px, py, pz, write)
+    return _sphere_rows(state.supply, model.supply_target, model.supply_rho, ox, oy, oz, px, py, pz, write)
 
 
 @jit_norc

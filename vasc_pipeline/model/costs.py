@@ -176,10 +176,13 @@ def supply_counts(terminals: np.ndarray, tissue: Tissue, supply_radius: float) -
     return counts
 
 
-def supply_cost(counts: np.ndarray, mask: np.ndarray) -> float:
-    """C_s = sum over tissue voxels of 10 if b = 0 else (b - 1)^2."""
-    b = counts[mask == 1].astype(np.int64)
-    return float(np.sum(np.where(b == 0, 10, (b - 1) ** 2)))
+def supply_cost(counts: np.ndarray, mask: np.ndarray, target: np.ndarray | None = None) -> float:
+    """C_s = sum over tissue voxels of 10 if b = 0 else (b - t)^2, t the voxel's coverage target
+    (``target``, from a demand map: :attr:`Tissue.supply_target`; None: t = 1 everywhere)."""
+    tissue = mask == 1
+    b = counts[tissue].astype(np.int64)
+    t = 1 if target is None else np.asarray(target)[tissue].astype(np.int64)
+    return float(np.sum(np.where(b == 0, 10, (b - t) ** 2)))
 
 
 def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = None) -> np.ndarray:
@@ -250,7 +253,7 @@ def full_costs(tree: Tree, tissue: Tissue, physics: Physics, terms: ActiveTerms 
     k, nt = tree.n_inlets, tree.n_terminals
     if terms.supply:
         counts = supply_counts(tree.position[k : k + nt], tissue, physics.supply_radius)
-        out["supply"] = supply_cost(counts, tissue.mask)
+        out["supply"] = supply_cost(counts, tissue.mask, tissue.supply_target)
     if terms.exclusion:
         out["exclusion"] = float(
             sum(

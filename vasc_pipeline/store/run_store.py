@@ -10,6 +10,7 @@ Layout::
                resumes (one {step, checkpoint} per resumed session), format
         tree/{parent, position, radius, kind}       final tree (complete runs)
         tissue/{mask, exclusion, distance}          the voxelised tissue, written at start
+        tissue/supply_target                        with tissue.demand_path: each voxel's coverage target
         trace/{step, temperature, volume, ..., total, acceptance}   dim "step"
         checkpoints/c<seq>/<state field>            kernel state (engine.state_arrays)
 
@@ -356,6 +357,19 @@ class RunStore(GroupStore, CheckpointsMixin):
                 },
             ),
         )
+        if getattr(tissue, "supply_target", None) is not None:  # tissue.demand_path
+            specs += (
+                (
+                    "supply_target",
+                    tissue.supply_target,
+                    "uint8",
+                    zyx,
+                    {
+                        "long_name": "coverage target of each tissue voxel from the demand map (0 outside the tissue)",
+                        "units": "1",
+                    },
+                ),
+            )
         for name, data, dtype, dims, attributes in specs:
             _write_whole_array(group, name, data, dtype, dims, attributes)
 

@@ -2,8 +2,10 @@
 
 :func:`build_tissue` returns a :class:`Tissue` for each named domain of :data:`TISSUES`:
 ``sphere``, ``box``, ``plane2d`` and ``mask`` (a user's array) from
-:mod:`~vasc_pipeline.model.tissue.shapes`, and ``heart``, the paper's coronary substrate, from
-:mod:`~vasc_pipeline.model.tissue.heart`. The voxel grid itself (the :class:`Tissue` class, its
+:mod:`~vasc_pipeline.model.tissue.shapes`, ``surface`` (a user's closed surface meshes) from
+:mod:`~vasc_pipeline.model.tissue.surfaces`, and ``heart``, the paper's coronary substrate, from
+:mod:`~vasc_pipeline.model.tissue.heart`. Any of them may carry a perfusion demand map
+(:mod:`~vasc_pipeline.model.tissue.demand`). The voxel grid itself (the :class:`Tissue` class, its
 distance transform, :func:`voxelize`, :func:`default_voxel_size`) is
 :mod:`~vasc_pipeline.model.tissue.grid`.
 """
@@ -13,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from . import heart
+from .demand import apply_demand
 from .grid import (
     VOXELS_PER_SUPPLY_RADIUS,
     ExclusionGrid,
@@ -23,6 +26,7 @@ from .grid import (
     voxelize,
 )
 from .shapes import box, given_inlets, mask, plane2d, sphere
+from .surfaces import surface
 
 __all__ = [
     "Tissue",
@@ -41,11 +45,12 @@ TISSUES: dict[str, Callable[..., Tissue]] = {
     "sphere": sphere,
     "box": box,
     "mask": mask,
+    "surface": surface,
 }
 # The tissues drawn from shapes: on another grid they are voxelised anew (the user's mask is resampled).
-SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box")
+SHAPED_TISSUES = ("heart", "plane2d", "sphere", "box", "surface")
 # The tissues with no inlets of their own: their builder takes tissue.inlets or tissue.inlets_path.
-OWN_INLETS_REQUIRED = ("mask",)
+OWN_INLETS_REQUIRED = ("mask", "surface")
 
 
 def build_tissue(
@@ -54,6 +59,7 @@ def build_tissue(
     exclusion_voxel_size: float | None = None,
     inlets=None,
     inlets_path: str | None = None,
+    demand_path: str | None = None,
     **params,
 ) -> Tissue:
     """Build the named tissue for ``n_terminals`` terminals (params: the tissue config).
@@ -67,22 +73,29 @@ def build_tissue(
     grid of its own (:attr:`Tissue.exclusion_grid`): a shaped tissue voxelised at that edge, over
     a box that does not depend on N, or a mask's exclusion domain resampled onto it. None, or
     the supply grid's own edge: the supply grid.
+
+    ``demand_path`` (``tissue.demand_path``): a map of relative perfusion demand, sampled onto the
+    supply grid and quantised to the supply term's coverage targets (:attr:`Tissue.supply_target`,
+    :mod:`~vasc_pipeline.model.tissue.demand`).
     """
     if name not in TISSUES:
         raise TissueError(f"tissue.name: unknown tissue {name!r}; accepted: {', '.join(sorted(TISSUES))}")
     build = TISSUES[name]
-    if name in OWN_INLETS_REQUIRED:
-        tissue = build(n_terminals, inlets=inlets, inlets_path=inlets_path, **params)
+    own = {"inlets": inlets, "inlets_path": inlets_path} if name in OWN_INLETS_REQUIRED else {}
+    if own:
+        tissue = build(n_terminals, **own, **params)
     else:
         tissue = build(n_terminals, **params)
         given = given_inlets(inlets, inlets_path)
         if given is not None:
             tissue.place_inlets(*given)
+    if demand_path:
+        apply_demand(tissue, demand_path)
     if exclusion_voxel_size is not None and exclusion_voxel_size != tissue.voxel_size:
         try:
             if name in SHAPED_TISSUES:
                 # only its exclusion grid is used: the tissue it voxelises is not reported again
-                twin = TISSUES[name](n_terminals, **{**params, "voxel_size": exclusion_voxel_size}, report=False)
+                twin = build(n_terminals, **own, **{**params, "voxel_size": exclusion_voxel_size}, report=False)
                 tissue.exclusion_grid = twin.exclusion_grid
             else:
                 tissue.exclusion_grid = resampled_exclusion_grid(tissue, exclusion_voxel_size)

@@ -34,6 +34,7 @@ __all__ = [
     "exclusion_distance",
     "resampled_exclusion_grid",
     "voxelize",
+    "grid_axes",
     "default_voxel_size",
     "check_grid_memory",
     "check_voxel_scale",
@@ -232,6 +233,10 @@ class Tissue:
     voxel_size_from : str, optional
         Where a user's voxel size came from (``tissue.voxel_size``, a label map's header, a Zarr
         attribute), the words :func:`check_voxel_scale` starts with; None for a shape built in code.
+    supply_target : uint8 ndarray (nz, ny, nx), optional
+        Each tissue voxel's coverage target t in 1..4 from a demand map (``tissue.demand_path``,
+        :mod:`~vasc_pipeline.model.tissue.demand`; 0 outside the tissue): its supply cost is 10 when
+        uncovered, else (b - t)^2. None: t = 1 everywhere.
     """
 
     name: str
@@ -246,6 +251,7 @@ class Tissue:
     inlets_from: str = field(default="the tissue's own inlets", repr=False)
     source: str | None = field(default=None, repr=False)
     voxel_size_from: str | None = field(default=None, repr=False)
+    supply_target: np.ndarray | None = field(default=None, repr=False)
     distance: np.ndarray = field(init=False, repr=False)
     exclusion_grid: ExclusionGrid = field(init=False, repr=False)
 
@@ -356,6 +362,15 @@ class Tissue:
         return self.n_tissue_voxels * self.voxel_size**self.ndim
 
     @property
+    def supply_measure(self) -> float:
+        """The volume the N supply spheres fill [m^3] (area in 2-D): each voxel counted
+        :attr:`supply_target` times, so R_supply follows the demand-weighted volume; without
+        targets, :attr:`measure`."""
+        if self.supply_target is None:
+            return self.measure
+        return float(np.sum(self.supply_target, dtype=np.int64)) * self.voxel_size**self.ndim
+
+    @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper [x, y, z] corners of the voxel grid's box [m]."""
         nz, ny, nx = self.mask.shape
@@ -429,6 +444,16 @@ def voxelize(
     The grid covers the box plus ``margin`` [m] and at least one voxel on every side
     (in-plane only for ``ndim == 2``). Returns (mask uint8 (z, y, x), origin [x, y, z]).
     """
+    origin, counts = grid_axes(lo, hi, voxel_size, margin, ndim)
+    axes = [origin[a] + voxel_size * np.arange(counts[a]) for a in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    return inside(x, y, z).astype(np.uint8), origin
+
+
+def grid_axes(lo, hi, voxel_size: float, margin: float = 0.0, ndim: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """(origin [x, y, z] of voxel [0, 0, 0]'s centre [m], voxel counts [x, y, z]) of the grid
+    :func:`voxelize` lays over the box [lo, hi] plus ``margin`` and a voxel on every side; refuses
+    (TissueError) one that would not fit in memory."""
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
     pad = margin + voxel_size
@@ -439,9 +464,7 @@ def voxelize(
         counts[2] = 1
         origin[2] = lo[2]
     check_grid_memory(counts, voxel_size)
-    axes = [origin[a] + voxel_size * np.arange(counts[a]) for a in range(3)]
-    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    return inside(x, y, z).astype(np.uint8), origin
+    return origin, counts
 
 
 def default_voxel_size(

@@ -108,16 +108,16 @@ def mask_geometry(path: str | None, array: str | None = None, voxel_size=None, o
     return h, o
 
 
-def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarray, dict]:
-    """(data, attrs) of a ``.npy`` file or a Zarr array; errors name ``tissue.<field>``."""
+def _load_mask_array(path: str, array: str | None, field: str, what: str = "mask") -> tuple[np.ndarray, dict]:
+    """(data, attrs) of a ``.npy`` file or a Zarr array; errors name ``tissue.<field>`` and the file as ``what``."""
     p = Path(path).expanduser()
     if not p.exists():
-        raise TissueError(f"tissue.{field}: mask file {str(p)!r} does not exist")
+        raise TissueError(f"tissue.{field}: {what} file {str(p)!r} does not exist")
     if images.is_label_map(p):  # NIfTI or NRRD: spacing and origin from the header
         data, h, origin = images.read_label_map(p, field)
         return data, {"voxel_size": h, "origin": origin.tolist()}
     if p.is_file() and p.suffix != ".npy":  # Zarr would call it "No group found in store"
-        raise TissueError(f"tissue.{field}: {str(p)!r} is not a mask this reads; accepted: {images.MASK_FORMATS}")
+        raise TissueError(f"tissue.{field}: {str(p)!r} is not a {what} this reads; accepted: {images.MASK_FORMATS}")
     if p.is_dir() and not any((p / name).is_file() for name in ("zarr.json", ".zarray", ".zgroup")):
         raise TissueError(
             f"tissue.{field}: {str(p)!r} is a directory but not a Zarr store (no zarr.json, .zarray or .zgroup in "
@@ -136,7 +136,7 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
                 )
                 raise TissueError(
                     f"tissue.{field}: {str(p)!r} is {kind}, not a NumPy .npy array (it starts with "
-                    f"{head[:24]!r}); save the mask with numpy.save, or give a Zarr array"
+                    f"{head[:24]!r}); save the {what} with numpy.save, or give a Zarr array"
                 )
             data = np.load(p, allow_pickle=False)
         else:
@@ -146,16 +146,19 @@ def _load_mask_array(path: str, array: str | None, field: str) -> tuple[np.ndarr
             if array:
                 node = node[array]
             if not hasattr(node, "shape"):
-                raise TissueError(f"tissue.{field}: {str(p)!r} is a Zarr group; name the mask's array in it")
+                raise TissueError(
+                    f"tissue.{field}: {str(p)!r} is a Zarr group; name the {what}'s array in it"
+                    + (f" (as a path: {str(p / 'ARRAY')!r})" if field == "demand_path" else "")
+                )
             data = node[...]
             attrs = dict(node.attrs)
     except TissueError:
         raise
     except Exception as exc:  # unreadable file: say which and why
-        raise TissueError(f"tissue.{field}: cannot read mask {str(p)!r}: {exc}") from exc
+        raise TissueError(f"tissue.{field}: cannot read {what} {str(p)!r}: {exc}") from exc
     if data.ndim not in (2, 3):
-        raise TissueError(f"tissue.{field}: the mask must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
-    if np.issubdtype(data.dtype, np.inexact) and not np.all(np.isfinite(data)):
+        raise TissueError(f"tissue.{field}: the {what} must be 2-D (y, x) or 3-D (z, y, x), got shape {data.shape}")
+    if what == "mask" and np.issubdtype(data.dtype, np.inexact) and not np.all(np.isfinite(data)):
         bad = int(np.count_nonzero(~np.isfinite(data)))
         raise TissueError(
             f"tissue.{field}: the mask {str(p)!r} holds {bad} NaN or infinite voxels; every voxel must "
