@@ -39,11 +39,11 @@ SOURCE = RUNS / "heart-N6000-mb641.3-s1.zarr"
 
 
 def quick_source(where: Path) -> str:
-    """A small annealed heart (N = 100, a short anneal) grown into ``where``: --quick's source, so
+    """A small annealed heart (N = 500, a short anneal) grown into ``where``: --quick's source, so
     the wiring is exercised on a clone that holds no study's stores."""
     from vasc_pipeline import config, job, sweep
 
-    (j,) = sweep.expand(config.compose(["n_terminals=100", "anneal.steps=100000", f"output_dir={where}"]))
+    (j,) = sweep.expand(config.compose(["n_terminals=500", "anneal.steps=100000", f"output_dir={where}"]))
     job.run_job(j)
     return j.store
 
