@@ -179,7 +179,7 @@ def test_bad_parameters_name_the_field(field, value):
             heart.heart_dimensions(**{field: value})
 
 
-# -- exclusion domain: myocardium plus the ventricular cavities (SPEC section 2, C_o) --------
+# -- exclusion domain: myocardium plus the ventricular cavities (the exclusion term C_o) --------
 
 
 def test_exclusion_domain_is_the_myocardium_plus_the_cavities(tissue1000, dims):

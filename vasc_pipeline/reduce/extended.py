@@ -54,8 +54,8 @@ Published pressures (:data:`PUBLISHED_PRESSURES`), source lines:
   microvascular resistance produced by dipyridamole. Am J Physiol 256:H383-H390 (dog).
 
 The numbers, about 60-80 % of aortic pressure in coronary arterioles of about 100-170 µm, are
-those papers' as summarised in the request that asked for this comparison; they were not read
-again from the papers here.
+those papers' as secondary sources summarise them; they were not checked against the papers'
+own tables here.
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ PUBLISHED_PRESSURES = {
     "fraction_max": 0.80,
     "source": "Chilian, Eastham & Marcus 1986, Am J Physiol 251:H779-H788 (cat); Chilian, Layne, Klausner, "
     "Eastham & Marcus 1989, Am J Physiol 256:H383-H390 (dog): about 60-80 % of aortic pressure in coronary "
-    "arterioles of about 100-170 um (as summarised in the request for this comparison, not read again here)",
+    "arterioles of about 100-170 um (as secondary sources summarise them, not checked against the papers' tables)",
 }
 
 TERRITORY_META = {
