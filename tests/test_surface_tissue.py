@@ -132,9 +132,9 @@ def test_a_run_on_surfaces_end_to_end_with_its_inputs_in_its_identity(tmp_path):
     assert job.run_job(j)["status"] == "complete"
     run = store.RunStore.open(j.store, mode="r")
     assert run.group["tissue"]["mask"].shape == problem.tissue.shape
-    from vasc_pipeline.reduce import reduce
+    from vasc_pipeline.pipeline.reduction import reduce_and_draw
 
-    result = reduce(tmp_path / "out", stream=None)
+    result = reduce_and_draw(tmp_path / "out", stream=None)
     assert (tmp_path / "out" / "trees" / f"{j.run_id}.vtp").is_file()
     assert list((tmp_path / "out" / "figures").glob("*.png"))
     assert result is not None
