@@ -9,6 +9,7 @@ N): means over the seeds, and the worst seed where a target is a bound.
 
     python studies/2026-12-06_model_levers/summarise.py
     python studies/2026-12-06_model_levers/summarise.py --out results/studies/model_levers --baseline DIR
+    python studies/2026-12-06_model_levers/summarise.py --scan results/studies/size_scan_physiological
     python studies/2026-12-06_model_levers/summarise.py --quick     # a tiny store, written and scored
 """
 
@@ -31,10 +32,14 @@ HERE = Path(__file__).resolve().parent
 BASELINE = Path("results/studies/size_scan/runs")
 
 
-def stores(out: Path, baseline: Path) -> list[tuple[str, Path]]:
-    """(lever, store) of every run store: ``<out>/<lever>/x1/runs/*.zarr`` and the baseline's as "paper"."""
+def stores(out: Path, baseline: Path, scan: Path | None = None) -> list[tuple[str, Path]]:
+    """(lever, store) of every run store: ``<out>/<lever>/x1/runs/*.zarr``, the baseline's as "paper"
+    and, with ``scan``, a size scan's output_dir (``runs/*.zarr``) as "scan:<its name>"."""
     found = [(p.parents[2].name, p) for p in sorted(out.glob("*/x*/runs/*.zarr"))]
-    return found + [("paper", p) for p in sorted(baseline.glob("heart-N*-s[0-3].zarr"))]
+    found += [("paper", p) for p in sorted(baseline.glob("heart-N*-s[0-3].zarr"))]
+    if scan is not None:
+        found += [(f"scan:{scan.name}", p) for p in sorted((scan / "runs").glob("*.zarr"))]
+    return found
 
 
 def score(pairs: list[tuple[str, Path]], rows_path: Path) -> list[dict]:
@@ -64,7 +69,8 @@ def table(rows: list[dict]) -> str:
     levers = sorted({r["lever"] for r in rows}, key=lambda s: (s != "paper", s))
     for lever in levers:
         for n in sorted({r["n_terminals"] for r in rows if r["lever"] == lever}):
-            group = [r for r in rows if r["lever"] == lever and r["n_terminals"] == n and r["seed"] <= 1]
+            seeds = 3 if lever.startswith("scan:") else 1  # a scan's four seeds; the levers' two
+            group = [r for r in rows if r["lever"] == lever and r["n_terminals"] == n and r["seed"] <= seeds]
             if not group:
                 continue
             share = [min(v for k, v in r.items() if k.startswith("terminal_share_")) for r in group]
@@ -105,11 +111,12 @@ def main(argv: list[str] | None = None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("results/studies/model_levers"), help="run.sh's OUT")
     parser.add_argument("--baseline", type=Path, default=BASELINE, help="the paper's model's run stores")
+    parser.add_argument("--scan", type=Path, default=None, help="a size scan's output_dir (scored too)")
     parser.add_argument("--quick", action="store_true", help="a tiny run, scored in a temporary directory")
     args = parser.parse_args(argv)
     if args.quick:
         return quick()
-    text = table(score(stores(args.out, args.baseline), HERE / "scored.jsonl"))
+    text = table(score(stores(args.out, args.baseline, args.scan), HERE / "scored.jsonl"))
     print(text)
     return text
 
