@@ -36,7 +36,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-from .run_store import STATUS_COMPLETE, STATUS_RUNNING, GroupStore, StoreError, _jsonable, file_lock
+from .run_store import STATUS_COMPLETE, STATUS_RUNNING, GroupStore, StoreError, _jsonable, run_lock
 
 __all__ = ["ExtendedStore", "EXTENDED_FORMAT", "TREE_CHUNK", "extended_lock", "identity_hash"]
 
@@ -67,14 +67,7 @@ def identity_hash(config: Mapping[str, Any], source_digest: str) -> str:
 @contextlib.contextmanager
 def extended_lock(path: str | os.PathLike, wait: bool = False) -> Iterator[None]:
     """Hold ``extended/.locks/<run_id>.lock`` while writing a store (released on exit or process death)."""
-    path = Path(path)
-    lock = path.parent / ".locks" / (path.name.removesuffix(".zarr") + ".lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    with contextlib.ExitStack() as stack:
-        try:
-            stack.enter_context(file_lock(lock, wait))
-        except BlockingIOError as exc:
-            raise StoreError(f"extended store {str(path)!r} is being written by another process") from exc
+    with run_lock(path, wait, what="extended store"):
         yield
 
 

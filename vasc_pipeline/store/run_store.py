@@ -148,8 +148,9 @@ def file_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[IO[str]]:
 
 
 @contextlib.contextmanager
-def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
-    """Hold an exclusive lock on ``runs/.locks/<run_id>.lock`` (released on exit or process death).
+def run_lock(path: str | os.PathLike, wait: bool = True, what: str = "run store") -> Iterator[None]:
+    """Hold an exclusive lock on ``<store's dir>/.locks/<run_id>.lock`` (released on exit or process
+    death); ``what`` names the store in the error.
 
     A job whose worker was declared dead may still be running; the lock makes a resubmitted
     copy wait for it instead of writing the same store at the same time.
@@ -161,7 +162,7 @@ def run_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[None]:
         try:
             stack.enter_context(file_lock(lock_path, wait))
         except BlockingIOError as exc:
-            raise StoreError(f"run store {str(path)!r} is being written by another process") from exc
+            raise StoreError(f"{what} {str(path)!r} is being written by another process") from exc
         yield
 
 
