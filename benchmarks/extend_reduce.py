@@ -9,7 +9,7 @@ another, whose resident memory is sampled every 0.2 s.
 
     python benchmarks/extend_reduce.py --n 100000                # 1e5 below the N = 6000 heart
     python benchmarks/extend_reduce.py --n 100000 --zerod full   # the full 0D network instead
-    python benchmarks/extend_reduce.py --quick                   # the N = 500 heart, n = 1000
+    python benchmarks/extend_reduce.py --quick                   # a small heart annealed here, n = 1000
 
 Prints one JSON line (times, memory, sizes, the anatomy, the pressures by order of the range
 reading), then the pressures as a table.
@@ -31,7 +31,6 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 RUNS = REPO / "results" / "studies" / "size_scan" / "runs"
 SOURCE = RUNS / "heart-N6000-mb641.3-s1.zarr"
-QUICK_SOURCE = RUNS / "heart-N500-mb641.3-s1.zarr"
 MMHG = 133.322387415
 
 
@@ -143,10 +142,15 @@ def main(argv=None) -> int:
         else:
             reduce_it(args.child[1], args.child[2])
         return 0
-    source = Path(args.source or (QUICK_SOURCE if args.quick else SOURCE))
     n = 1000 if args.quick else int(args.n)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="extend_reduce_"))
     try:
+        if args.source or not args.quick:
+            source = Path(args.source or SOURCE)
+        else:  # the clone holds no study's stores: the same small heart as extend_scaling's --quick
+            from extend_scaling import quick_source
+
+            source = Path(quick_source(out / "quick_source"))
         (out / "runs").mkdir(parents=True, exist_ok=True)
         copy = out / "runs" / source.name
         if not copy.exists():

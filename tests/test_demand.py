@@ -47,7 +47,7 @@ def test_demand_is_quantised_to_coverage_targets_halves_up_capped_at_four():
 @pytest.mark.parametrize("t", [1, 2, 3, 4])
 def test_the_kernels_count_changes_are_the_cost_differences_at_every_target(t):
     def s(b):
-        return 10 if b == 0 else (b - t) ** 2
+        return 10 * (t - b) if b < t else (b - t) ** 2
 
     for b in range(0, 12):
         assert kernel.supply._gain_change_to(b, t) == s(b + 1) - s(b)
@@ -56,15 +56,15 @@ def test_the_kernels_count_changes_are_the_cost_differences_at_every_target(t):
         if t == 1:  # the targets' formulas are the map-free ones at t = 1
             assert kernel.supply._gain_change_to(b, 1) == kernel.supply._gain_change(b)
             assert b == 0 or kernel.supply._loss_change_to(b, 1) == kernel.supply._loss_change(b)
-        # every sphere added towards the target lowers the cost (why the targets stop at 4)
-        assert b >= t or s(b + 1) < s(b)
+        # every sphere added towards the target lowers the cost by what one uncovered voxel costs
+        assert b >= t or s(b + 1) - s(b) == -10
 
 
 def test_supply_cost_reference_with_targets():
     counts = np.array([[[0, 1, 2, 3, 0, 5, 2]]])
     mask = np.array([[[1, 1, 1, 1, 0, 1, 1]]], dtype=np.uint8)
     target = np.array([[[2, 2, 2, 2, 0, 4, 1]]], dtype=np.uint8)
-    assert costs.supply_cost(counts, mask, target) == 10 + 1 + 0 + 1 + 1 + 1
+    assert costs.supply_cost(counts, mask, target) == 20 + 10 + 0 + 1 + 1 + 1
     assert costs.supply_cost(counts, mask) == 10 + 0 + 1 + 4 + 16 + 1
     assert costs.supply_cost(counts, mask, np.ones_like(target)) == costs.supply_cost(counts, mask)
 

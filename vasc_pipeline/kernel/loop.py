@@ -44,12 +44,25 @@ def initialise(model, state):
             for i in range(nx):
                 supply[k, j, i] = 0 if model.mask[k, j, i] != 0 else -1
     if model.supply_on:
-        c_s = 10.0 * np.count_nonzero(model.mask)
+        # every voxel uncovered: s(0) = 10 t, t = 1 without a demand map
+        c_s = 10.0 * (np.count_nonzero(model.mask) if model.supply_target.shape[0] == 0 else _target_sum(model))
         for t in range(model.n_inlets, model.n_inlets + model.n_terminals):
             c_s += supply_sphere(model, supply, state.position[t], 1)
         state.costs[SUPPLY] = c_s
     if model.pressure_on:
         state.costs[PRESSURE] = pressure_cost(model, state)
+
+
+@jit_norc
+def _target_sum(model):
+    """Sum of the tissue voxels' coverage targets (the demand map's)."""
+    total = 0
+    target = model.supply_target
+    for k in range(target.shape[0]):
+        for j in range(target.shape[1]):
+            for i in range(target.shape[2]):
+                total += np.int64(target[k, j, i]) * (model.mask[k, j, i] != 0)
+    return total
 
 
 @jit

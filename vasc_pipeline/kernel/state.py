@@ -115,7 +115,7 @@ Model = namedtuple(
         "prefetch_supply",  # bool: prefetch the count map's rows under both spheres before a
         # terminal move's supply change is computed row by row (the same sums either way)
         "supply_target",  # uint8 (nz, ny, nx): each tissue voxel's coverage target t (tissue.demand_path;
-        # s = 10 uncovered, else (b - t)^2); shape (0, 0, 0): t = 1 everywhere, read by no loop
+        # s = 10 (t - b) below it, else (b - t)^2); shape (0, 0, 0): t = 1 everywhere, read by no loop
     ],
 )
 

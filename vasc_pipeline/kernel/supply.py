@@ -6,7 +6,9 @@ while a terminal stays near the centre of its shell, over the shell's voxels onl
 sums either way).
 
 With a demand map (``tissue.demand_path``) each voxel has a coverage target t in 1..4, the
-``Model``'s ``supply_target``, and s(b) = (b - t)^2 for b > 0. Without one that array is empty
+``Model``'s ``supply_target``, and s(b) = 10 (t - b) below the target, (b - t)^2 at or above
+it: each missing layer costs what an uncovered voxel of target 1 costs, so a deficit weighs
+alike at every level (at t = 1 it is s without a map). Without one that array is empty
 and the loops of t = 1 run, reading no target: a run without a map is the run before the map
 existed, in its trees and its speed.
 """
@@ -122,15 +124,17 @@ def _loss_change(b):
 
 @jit_norc_inline
 def _gain_change_to(b, t):
-    """:func:`_gain_change` for a voxel of coverage target t: s(b) = (b - t)^2 for b > 0, s(0) = 10,
-    so s(b + 1) - s(b) = 2 (b - t) + 1 + (t^2 - 10) [b = 0]; equal to it at t = 1."""
-    return (2 * (b - t) + 1) + (t * t - 10) * (b == 0)
+    """:func:`_gain_change` for a voxel of coverage target t: s(b) = 10 (t - b) for b < t, else
+    (b - t)^2, so s(b + 1) - s(b) = -10 below the target and 2 (b - t) + 1 from it on; equal to
+    it at t = 1."""
+    return -10 if b < t else 2 * (b - t) + 1
 
 
 @jit_norc_inline
 def _loss_change_to(b, t):
-    """:func:`_loss_change` for a voxel of coverage target t: s(b - 1) - s(b) = 1 - 2 (b - t) + (10 - t^2) [b = 1]."""
-    return (1 - 2 * (b - t)) + (10 - t * t) * (b == 1)
+    """:func:`_loss_change` for a voxel of coverage target t: s(b - 1) - s(b) = 10 up to the
+    target and 1 - 2 (b - t) above it."""
+    return 10 if b <= t else 1 - 2 * (b - t)
 
 
 @jit_norc_inline

@@ -177,12 +177,13 @@ def supply_counts(terminals: np.ndarray, tissue: Tissue, supply_radius: float) -
 
 
 def supply_cost(counts: np.ndarray, mask: np.ndarray, target: np.ndarray | None = None) -> float:
-    """C_s = sum over tissue voxels of 10 if b = 0 else (b - t)^2, t the voxel's coverage target
-    (``target``, from a demand map: :attr:`Tissue.supply_target`; None: t = 1 everywhere)."""
+    """C_s = sum over tissue voxels of s(b) = 10 (t - b) for b < t, else (b - t)^2, b the voxel's
+    coverage and t its target (``target``, from a demand map: :attr:`Tissue.supply_target`;
+    None: t = 1 everywhere, so s(0) = 10 and s(b) = (b - 1)^2)."""
     tissue = mask == 1
     b = counts[tissue].astype(np.int64)
     t = 1 if target is None else np.asarray(target)[tissue].astype(np.int64)
-    return float(np.sum(np.where(b == 0, 10, (b - t) ** 2)))
+    return float(np.sum(np.where(b < t, 10 * (t - b), (b - t) ** 2)))
 
 
 def node_pressures(tree: Tree, physics: Physics, lengths: np.ndarray | None = None) -> np.ndarray:

@@ -25,9 +25,9 @@ __all__ = ["DEMAND_LEVELS", "read_demand", "demand_targets", "apply_demand"]
 
 log = logging.getLogger(__name__)
 
-# The largest coverage target. A voxel of target t costs s(0) = 10 uncovered and s(1) = (1 - t)^2
-# covered once; up to t = 4 (9 < 10) every sphere added towards the target lowers the cost, beyond it
-# one sphere would cost more than none, and sparse coverage of high-demand tissue would be avoided.
+# The largest coverage target: a demand range of 4:1. The cost charges each missing layer alike
+# at every target (10 per layer), so nothing in it stops at 4; the density is measured at 2:1
+# only (docs/findings/demand.md), and wider ranges wait for a measurement.
 DEMAND_LEVELS = 4
 
 

@@ -235,8 +235,8 @@ class Tissue:
         attribute), the words :func:`check_voxel_scale` starts with; None for a shape built in code.
     supply_target : uint8 ndarray (nz, ny, nx), optional
         Each tissue voxel's coverage target t in 1..4 from a demand map (``tissue.demand_path``,
-        :mod:`~vasc_pipeline.model.tissue.demand`; 0 outside the tissue): its supply cost is 10 when
-        uncovered, else (b - t)^2. None: t = 1 everywhere.
+        :mod:`~vasc_pipeline.model.tissue.demand`; 0 outside the tissue): its supply cost is
+        10 (t - b) below the target, else (b - t)^2. None: t = 1 everywhere.
     """
 
     name: str
