@@ -1,4 +1,4 @@
-"""The study scripts of workflows/: wiring only, with tiny settings (real sweeps, local cluster)."""
+"""The paper's study scripts (studies/paper/): wiring only, with tiny settings (real sweeps, local cluster)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import xarray as xr
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
 REPO = Path(__file__).resolve().parents[1]
+PAPER_STUDY = REPO / "studies" / "paper"
 TINY = [
     "sweep.seeds=[0]",
     "anneal.steps=3000",
@@ -30,7 +31,7 @@ def study(script: str, tmp_path: Path, *args: str) -> subprocess.CompletedProces
         "PYTHON": sys.executable,
     }
     return subprocess.run(
-        ["bash", str(REPO / "workflows" / script), *args],
+        ["bash", str(PAPER_STUDY / script), *args],
         cwd=REPO,
         env=env,
         capture_output=True,
@@ -86,7 +87,7 @@ def test_each_study_script_wires_its_sweeps(tmp_path, script, expected):
 
 
 def test_cluster_argument():
-    common = REPO / "workflows" / "_common.sh"
+    common = PAPER_STUDY / "_common.sh"
     for arg, expected in [
         ("local", "cluster=local"),
         ("slurm", "cluster=slurm"),

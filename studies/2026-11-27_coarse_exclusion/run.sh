@@ -4,10 +4,11 @@
 # a checkpointed pipeline job, so rerunning this script after an interruption continues where
 # it stopped (even inside an N = 6000 run). Rows go to OUT/rows.jsonl.
 #
-#     bash benchmarks/studies/2026-11-27_coarse_exclusion/run.sh [OUT [PART ...]]   # default OUT: results/coarse_exclusion
+#     bash studies/2026-11-27_coarse_exclusion/run.sh [--dry-run] [OUT [PART ...]]   # default OUT: results/coarse_exclusion
 #
 # PART is 1, 2 or 3 below (default: all three, in order); e.g. `... results/coarse_exclusion 3`
-# continues only the full-budget N = 6000 runs.
+# continues only the full-budget N = 6000 runs. --dry-run prints the commands instead of running
+# them (the tests run that).
 #
 # with the environment that has vasc_pipeline installed active (the script calls `python`).
 #
@@ -23,11 +24,14 @@
 # one after the other on a shared machine are no paired comparison (the coarse part's speed is
 # measured in docs/findings/coarse-exclusion.md). Runs one job at a time (--workers 1).
 set -euo pipefail
-cd "$(dirname "$0")/../../.."
+cd "$(dirname "$0")/../.."
+DRY=
+[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
+run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
 OUT=${1:-results/coarse_exclusion}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2 3)
-T=(python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast)
+T=(run python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast)
 COARSE=(--label "fast, coarse_exclusion 2 over 0.3" --override anneal.coarse_exclusion_factor=2
         --override anneal.coarse_exclusion_phase=0.3 --override anneal.steps_exponent=2)
 for part in "${PARTS[@]}"; do

@@ -9,15 +9,23 @@
 # inside an N = 6000 run). Rows go to OUT/rows.jsonl and are merged into rows.jsonl beside this
 # script after each part; summarise.py prints the tables of the notes (README.md here).
 #
-#     bash benchmarks/studies/2026-12-02_exclusion_grid/run.sh [OUT [PART ...]]
+#     bash studies/2026-12-02_exclusion_grid/run.sh [--dry-run] [OUT [PART ...]]
 #
+# --dry-run prints the commands instead of running them (the tests run that).
 # OUT defaults to results/exclusion_grid_study; PART (default all, in order) is VARIANT:SIZES,
 # SIZES "small" (N = 500, 1000, 2000, seeds 0-3) or "large" (N = 4000 and 6000, seeds 0, 1).
 # Run with the environment that has vasc_pipeline installed (the script calls `python`), one
 # job at a time (--workers 1); start a second copy with other parts to use both cores.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-cd "$here/../../.."
+cd "$here/../.."
+DRY=
+[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
+run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+merge() {  # merge FROM INTO: FROM's rows appended to INTO, each row once
+  if [ -n "$DRY" ]; then echo "# merge $1 into $2"; return; fi
+  cat "$1" >> "$2" && sort -u -o "$2" "$2"
+}
 OUT=${1:-results/exclusion_grid_study}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(b:small a:small bp:small c:small b:large a:large bp:large c:large)
@@ -41,8 +49,7 @@ for part in "${PARTS[@]}"; do
   if [ "${part#*:}" = large ] && [ "$variant" != a ] && [ "$variant" != b ]; then
     sizes=(--sizes 4000 --seeds 0 1)  # N = 6000 of b' and c is a's run: the same grids, bit for bit
   fi
-  python benchmarks/time_to_quality.py --out "$OUT" --workers 1 "${FAST[@]}" "${grid[@]}" "${sizes[@]}"
+  run python benchmarks/time_to_quality.py --out "$OUT" --workers 1 "${FAST[@]}" "${grid[@]}" "${sizes[@]}"
   # Every OUT this study has used, into the one rows file (parts may run in two OUTs side by side).
-  cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
-  sort -u -o "$here/rows.jsonl" "$here/rows.jsonl"
+  merge "$OUT/rows.jsonl" "$here/rows.jsonl"
 done

@@ -10,13 +10,18 @@ lengths of orders 8-10 against Kassab's at the largest N. At N = 6000 the supply
 is 0.504 mm, so a's runs there are b''s and c's too (the same grids, the same runs bit for bit):
 they are counted under all three.
 
-    python benchmarks/studies/2026-12-02_exclusion_grid/summarise.py [ROWS]
+    python studies/2026-12-02_exclusion_grid/summarise.py [ROWS]
+    python studies/2026-12-02_exclusion_grid/summarise.py --quick   # the rows and one tiny run's
+
+``--quick`` adds the row of a tiny run (N = 40, made and scored in a temporary directory) to the
+rows, so that the tables are checked on a row of today's scoring as well as on the study's.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -121,11 +126,30 @@ def with_shared_runs(rows: list[dict]) -> list[dict]:
     return rows + [{**r, "anneal": label} for label in SAME_AS_A_AT_6000 for r in shared]
 
 
-def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    path = Path(args[0]) if args else Path(__file__).with_name("rows.jsonl")
-    rows = with_shared_runs([json.loads(line) for line in path.read_text().splitlines() if line.strip()])
-    print("\n".join(table(rows) + trend(rows) + upper_order_lengths(rows)))
+def quick_row() -> dict:
+    """The row of one tiny run (N = 40, 20 000 moves), as time_to_quality.py writes it."""
+    from vasc_pipeline import config, job, sweep
+    from vasc_pipeline.reduce.fidelity import run_row
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (j,) = sweep.expand(config.compose(["n_terminals=40", "anneal.steps=20000", f"output_dir={tmp}"]))
+        job.run_job(j)
+        row = run_row(j.store)
+    return {"n_terminals": row.pop("n_terminals"), "anneal": "quick", "budget": 1.0, **row}
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("rows", nargs="?", type=Path, default=Path(__file__).with_name("rows.jsonl"))
+    parser.add_argument("--quick", action="store_true", help="add one tiny run's row (made in a temporary dir)")
+    args = parser.parse_args(argv)
+    rows = [json.loads(line) for line in args.rows.read_text().splitlines() if line.strip()]
+    if args.quick:
+        rows.append(quick_row())
+    rows = with_shared_runs(rows)
+    text = "\n".join(table(rows) + trend(rows) + upper_order_lengths(rows))
+    print(text)
+    return text
 
 
 if __name__ == "__main__":

@@ -5,8 +5,9 @@
 # session's end) and it continues inside the run where it stopped. Rows go to OUT/rows.jsonl
 # and are merged into rows.jsonl beside this script after each part.
 #
-#     bash benchmarks/studies/2026-12-02_parts/run.sh [OUT [PART ...]]
+#     bash studies/2026-12-02_parts/run.sh [--dry-run] [OUT [PART ...]]
 #
+# --dry-run prints the commands instead of running them (the tests run that).
 # OUT defaults to results/studies/parts; PART (default all, in this order):
 #   share     N = 2000, K = 2, anneal.part_share 0.9 / 0.95 / 0.99, seeds 0, 1, one thread
 #             (the trees do not depend on the thread count; only their quality is read)
@@ -25,11 +26,18 @@
 # Run with the environment that has vasc_pipeline installed (the script calls `python`).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-cd "$here/../../.."
+cd "$here/../.."
+DRY=
+[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
+run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+merge() {  # merge FROM INTO: FROM's rows appended to INTO, each row once
+  if [ -n "$DRY" ]; then echo "# merge $1 into $2"; return; fi
+  cat "$1" >> "$2" && sort -u -o "$2" "$2"
+}
 OUT=${1:-results/studies/parts}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate check budget)
-T=(python benchmarks/time_to_quality.py --out "$OUT" --anneal fast)
+T=(run python benchmarks/time_to_quality.py --out "$OUT" --anneal fast)
 for part in "${PARTS[@]}"; do
   case $part in
     share)
@@ -43,15 +51,14 @@ for part in "${PARTS[@]}"; do
     n20000)
       "${T[@]}" --sizes 20000 --seeds 0 --parts 4 --workers 2 ;;
     calibrate)
-      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 6000 --parts 4 --seeds 0
-      cat "$OUT/cost_model/rows.jsonl" >> "$here/cost_model_rows.jsonl"
-      sort -u -o "$here/cost_model_rows.jsonl" "$here/cost_model_rows.jsonl" ;;
+      run python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 6000 --parts 4 --seeds 0
+      merge "$OUT/cost_model/rows.jsonl" "$here/cost_model_rows.jsonl" ;;
     check)
-      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 2000 --parts 4 8 --seeds 0
+      run python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --sizes 2000 --parts 4 8 --seeds 0
       for k in 2 4 8; do
         for w in 1 2; do "${T[@]}" --sizes 2000 --seeds 0 --parts $k --workers $w --label "check-parts$k-w$w"; done
       done
-      python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --check "$OUT/rows.jsonl" ;;
+      run python benchmarks/parts_cost_model.py --out "$OUT/cost_model" --check "$OUT/rows.jsonl" ;;
     budget)
       for b in 1.12 1.25; do "${T[@]}" --sizes 2000 --seeds 0 1 --parts 2 --workers 1 --budgets $b; done
       more=(--parts 2 --budgets 1.25 --override anneal.part_share=0.99)  # the time-to-quality setting
@@ -61,7 +68,6 @@ for part in "${PARTS[@]}"; do
       "${T[@]}" "${more[@]}" --sizes 6000 --seeds 2 --workers 1 --label fast-parts2-w1-share0.99 ;;
     *) echo "PART must be share, n6000, n20000, calibrate, check or budget, got '$part'" >&2; exit 2 ;;
   esac
-  [ -f "$OUT/rows.jsonl" ] || continue
-  cat "$OUT/rows.jsonl" >> "$here/rows.jsonl"
-  sort -u -o "$here/rows.jsonl" "$here/rows.jsonl"
+  [ -n "$DRY" ] || [ -f "$OUT/rows.jsonl" ] || continue
+  merge "$OUT/rows.jsonl" "$here/rows.jsonl"
 done

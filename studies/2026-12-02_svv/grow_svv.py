@@ -5,7 +5,8 @@ Run in the SEPARATE svv venv (svv 0.0.57 needs numpy < 2; never in our env), aft
 
     python3 -m venv /tmp/svv-venv && /tmp/svv-venv/bin/pip install svv     # svv 0.0.57
     SVV_TELEMETRY_DISABLED=1 nice -n 10 /tmp/svv-venv/bin/python \
-        benchmarks/studies/2026-12-02_svv/grow_svv.py --n 1000 --out /tmp/svv_study [--single]
+        studies/2026-12-02_svv/grow_svv.py --n 1000 --out /tmp/svv_study [--single]
+    python studies/2026-12-02_svv/grow_svv.py --dry-run [--n 1000 ...]   # any env: the plan, svv not imported
 
 Steps (each timed, the times written to ``svv_N<N>.json``):
 
@@ -29,6 +30,9 @@ Steps (each timed, the times written to ``svv_N<N>.json``):
 The growth runs in chunks of ``--chunk`` terminals per tree and stops after the chunk that
 passes ``--budget-seconds`` (default 40 min): the trees reached are exported as they are
 (``terminals_reached`` and the progress [terminals, wall s, CPU s] in the JSON).
+
+``--dry-run`` prints, per N, what a run would read, give svv and write (one JSON line each)
+and imports neither svv nor its surface tools, so it runs in our env (the tests run it).
 
 Telemetry: svv's Sentry module (``svv/telemetry.py``) is only initialised by its GUI and
 honours ``SVV_TELEMETRY_DISABLED=1``; the script sets it before importing svv and never
@@ -92,9 +96,32 @@ def export_tree(tree, path: Path) -> int:
     return int(out.shape[0])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--n", type=int, required=True, help="terminals in all")
+def plan(n: int, out: Path, single: bool) -> dict:
+    """What a run of ``n`` terminals reads, gives svv and writes, without svv: the dry run."""
+    tag = f"N{n}" + ("_single" if single else "")
+    npz = out / f"heart_N{n}.npz"
+    row = {
+        "n": n,
+        "input": str(npz),
+        "input_exists": npz.is_file(),
+        "trees": 1 if single else 2,
+        "terminals_per_tree": n if single else n // 2,
+        "terminal_flow_cm3_s": Q0_M3S * 1e6 / n,
+        "root_pressure_barye": P_IN_PA * 10.0,
+        "terminal_pressure_barye": P_T_PA * 10.0,
+        "outputs": [str(out / f"heart_{tag}.vtp"), str(out / f"svv_{tag}.json")]
+        + [str(out / f"svv_{tag}_tree{i}.csv") for i in range(1 if single else 2)],
+    }
+    if npz.is_file():
+        d = np.load(npz)
+        row["roots_cm"] = (d["inlets"] * 100.0).tolist()[: row["trees"]]
+        row["roots"] = [str(s) for s in d["inlet_names"]][: row["trees"]]
+    return row
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", help="terminals in all (one N a run; --dry-run: default 1000 6000)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/svv_study"))
     ap.add_argument("--single", action="store_true", help="one tree at the LCA ostium")
     ap.add_argument("--surface-points", type=int, default=4000)
@@ -107,14 +134,21 @@ def main() -> None:
         default=2400.0,
         help="stop growing after the chunk that passes this wall time (the N reached is reported)",
     )
-    args = ap.parse_args()
+    ap.add_argument("--dry-run", action="store_true", help="print the plan per N; svv is not imported")
+    args = ap.parse_args(argv)
+    if args.dry_run:
+        for n in args.n or [1000, 6000]:
+            print(json.dumps(plan(n, args.out, args.single)))
+        return
+    if args.n is None or len(args.n) != 1:
+        ap.error("give one N: --n N")
 
     import svv
     from svv.domain.domain import Domain
     from svv.forest.forest import Forest
     from svv.tree.tree import Tree
 
-    n = args.n
+    n = args.n[0]
     tag = f"N{n}" + ("_single" if args.single else "")
     info: dict = {"n": n, "svv_version": svv.__version__, "single": args.single, "seed": args.seed}
     t0 = time.perf_counter()

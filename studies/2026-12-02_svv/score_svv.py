@@ -1,10 +1,12 @@
-"""Score svVascularize's trees under our cost and against Kassab (run in OUR env).
+"""Score svVascularize's trees, and our CCO's, under our cost and against Kassab (run in OUR env).
 
 Run from the repository root with the system python, after ``grow_svv.py`` (svv venv)
 wrote ``svv_N<N>.json`` and ``svv_N<N>_tree<i>.csv``:
 
-    python benchmarks/studies/2026-12-02_svv/score_svv.py --n 1000 6000 --dir /tmp/svv_study \
-        --rows benchmarks/studies/2026-12-02_svv/rows.jsonl
+    python studies/2026-12-02_svv/score_svv.py --n 1000 6000 --dir /tmp/svv_study \
+        --rows studies/2026-12-02_svv/rows.jsonl
+    python studies/2026-12-02_svv/score_svv.py --cco --n 1000 6000   # our CCO, into rows_cco.jsonl
+    python studies/2026-12-02_svv/score_svv.py --quick   # the committed N = 1000 trees, a small CCO: a temporary file
 
 Conversion to our arrays: tree i of the svv forest is rooted at our inlet i (LCA, RCA);
 a node per segment end: the inlet at the root segment's proximal point, then every
@@ -21,12 +23,19 @@ flows, equal terminal pressures, svv's viscosity; svv's root radius formula), an
 ``*_svv_exported``, svv's radius column as exported (in 0.0.57 a few per cent of its
 segments come out wider than their parent, which Murray's law forbids: the column is not
 refreshed on every segment as the Forest grows). One JSON row per N appended to ``--rows``.
+
+``--cco``: our CCO instead (``method=cco``), one tree per N (``cco.grow(problem, seed)``, seed
+0: random sites with Schreiner's distance criterion, growth only timed) on the heart of
+``tissue=heart n_terminals=N``, scored by the same :func:`score_arrays` (our C_v, C_w, C_o, C_s,
+cavity share, Kassab errors with our radii); its rows go to ``rows_cco.jsonl`` by default. The
+anneal is not rerun: its rows are quoted from ``benchmarks/results/time_to_quality_rows.jsonl``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -207,18 +216,47 @@ def score(n: int, folder: Path, tag: str) -> dict:
     return row
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
+def score_cco(n: int, seed: int) -> dict:
+    """Our CCO tree of ``n`` terminals on the heart (``method=cco``), scored by :func:`score_arrays`."""
+    from vasc_pipeline import cco, config, engine
+
+    problem = engine.build_problem(config.compose(["tissue=heart", f"n_terminals={n}", "method=cco"]))
+    result = cco.grow(problem, seed)
+    t = result.tree
+    row = {"method": "cco (ours)", "seed": seed, "wall_seconds": result.wall_seconds}
+    row.update(score_arrays(t.parent, t.position, t.n_inlets, t.n_terminals, problem=problem))
+    return row
+
+
+def append(row: dict, rows: Path) -> None:
+    print(json.dumps(row), flush=True)
+    with rows.open("a") as f:
+        f.write(json.dumps(row) + "\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 6000])
     ap.add_argument("--tag", default="", help="suffix of the svv run's tag, e.g. _single")
-    ap.add_argument("--dir", type=Path, default=Path("/tmp/svv_study"))
-    ap.add_argument("--rows", type=Path, default=Path(__file__).with_name("rows.jsonl"))
-    args = ap.parse_args()
+    ap.add_argument("--dir", type=Path, default=Path("/tmp/svv_study"), help="grow_svv.py's --out")
+    ap.add_argument("--rows", type=Path, help="rows file (default: rows.jsonl, with --cco rows_cco.jsonl, here)")
+    ap.add_argument("--cco", action="store_true", help="score our CCO (grown here) instead of svv's trees")
+    ap.add_argument("--seed", type=int, default=0, help="our CCO's seed (with --cco)")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help="the committed svv trees of N = 1000 and our CCO at N = 100, into a temporary rows file",
+    )
+    args = ap.parse_args(argv)
+    if args.quick:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows = Path(tmp) / "rows.jsonl"
+            append(score(1000, Path(__file__).with_name("trees"), "N1000"), rows)
+            append(score_cco(100, 0), rows)
+        return
+    rows = args.rows or Path(__file__).with_name("rows_cco.jsonl" if args.cco else "rows.jsonl")
     for n in args.n:
-        row = score(n, args.dir, f"N{n}{args.tag}")
-        print(json.dumps(row), flush=True)
-        with args.rows.open("a") as f:
-            f.write(json.dumps(row) + "\n")
+        append(score_cco(n, args.seed) if args.cco else score(n, args.dir, f"N{n}{args.tag}"), rows)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
 """The study's table: svv's trees beside our CCO and our anneal (run in OUR env or any python).
 
-    python benchmarks/studies/2026-12-02_svv/summarise.py
+    python studies/2026-12-02_svv/summarise.py
+    python studies/2026-12-02_svv/summarise.py --quick   # the same: it reads committed rows only
 
 Reads this folder's ``rows.jsonl`` (svv, ``score_svv.py``) and ``rows_cco.jsonl`` (our CCO,
-``score_ours_cco.py``), and quotes, without rerunning anything:
+``score_svv.py --cco``), and quotes, without rerunning anything:
 
 - our anneal: ``benchmarks/results/time_to_quality_rows.jsonl``, the rows of today's
   ``anneal=fast`` (label "fast, steps_exponent=1.7, coarse_exclusion_phase=0.4", budget 1;
@@ -18,13 +19,14 @@ Prints markdown tables.
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).parent
-ROOT = HERE.parents[2]
+ROOT = HERE.parents[1]
 FAST = "fast, steps_exponent=1.7, coarse_exclusion_phase=0.4"
 ART = ("RCA", "LAD", "LCX")
 
@@ -42,7 +44,10 @@ def _agg(vals) -> str:
     return f"{v.mean():.4g} [{v.min():.3g}–{v.max():.3g}]"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="the same tables: they need no runs (for the tests)")
+    parser.parse_args(argv)
     svv = _rows(HERE / "rows.jsonl")
     cco = _rows(HERE / "rows_cco.jsonl")
     ttq = [

@@ -1,6 +1,7 @@
-"""Print every number REPORT.md quotes, from the tracked outputs in results/paper/ (no run stores needed).
+"""Print every number results/paper/REPORT.md quotes, from the tracked outputs in results/paper/ (no run stores needed).
 
-    python results/paper/report_numbers.py            # from the repository root
+    python studies/paper/report_numbers.py
+    python studies/paper/report_numbers.py --quick    # the same: it reads tracked files only
 
 Each block names the file it reads. Diameters in µm, lengths in mm, errors in dex
 (|log10 model/Kassab|), as in the report.
@@ -8,6 +9,7 @@ Each block names the file it reads. Diameters in µm, lengths in mm, errors in d
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -18,18 +20,18 @@ import xarray as xr
 from vasc_pipeline.reduce.morphometry import compare_with_kassab, inlet_of, morphometry
 from vasc_pipeline.reduce.ordering import READINGS
 
-HERE = Path(__file__).resolve().parent
+PAPER = Path(__file__).resolve().parents[2] / "results" / "paper"  # what the study scripts collected
 SCHEME = "diameter_defined"
 
 
 def open_summary(study: str) -> xr.DataTree | None:
-    path = HERE / study / "summary.zarr"
+    path = PAPER / study / "summary.zarr"
     return xr.open_datatree(path, engine="zarr") if path.is_dir() else None
 
 
 def tree_arrays(study: str, run_id: str) -> tuple:
     """(parent, position, radius, kind) of an exported tree (trees/<run_id>.csv)."""
-    table = pd.read_csv(HERE / study / "trees" / f"{run_id}.csv")
+    table = pd.read_csv(PAPER / study / "trees" / f"{run_id}.csv")
     parent = table["parent"].fillna(-1).to_numpy(dtype=np.int64)
     position = table[["x_m", "y_m", "z_m"]].to_numpy()
     return parent, position, table["radius_m"].fillna(0.0).to_numpy(), table["kind"].to_numpy(dtype=np.int8)
@@ -176,7 +178,10 @@ def consistency(summary: xr.DataTree) -> None:
         )
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="the same numbers: they need no runs (for the tests)")
+    parser.parse_args(argv)
     found = False
     # Today's model, and the scan under the earlier one (exclusion on the supply grid, fast_v1).
     for study in ("size_scan", "size_scan_fast_v1"):
