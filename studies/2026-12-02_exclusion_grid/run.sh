@@ -7,7 +7,7 @@
 #   c   both grids fixed at the N = 6000 voxel (tissue.voxel_size), so N = 6000 is again a's
 # Resumable: every run is a checkpointed pipeline job; rerun the same command to continue (even
 # inside an N = 6000 run). Rows go to OUT/rows.jsonl and are merged into rows.jsonl beside this
-# script after each part; summarise.py prints the tables of the notes (README.md here).
+# script after each part; summarise.py prints the tables of the README here.
 #
 #     bash studies/2026-12-02_exclusion_grid/run.sh [--dry-run] [OUT [PART ...]]
 #
