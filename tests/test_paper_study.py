@@ -61,12 +61,13 @@ def test_size_scan_runs_the_sweep_then_collects_its_small_outputs(tmp_path):
 @pytest.mark.parametrize(
     "script, expected",
     [
-        (
+        pytest.param(  # two sweeps: slow; its commands are checked in dry mode by tests/test_studies.py
             "convergence.sh",
             {
                 "convergence_paper": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],
                 "convergence_fast": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],
             },
+            marks=pytest.mark.slow,
         ),
         ("consistency.sh", {"consistency": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"]}),
         ("mb_scan.sh", {"mb_scan": ["heart-N12-mb641.3-s0", "heart-N12-mb6413-s0"]}),
