@@ -171,8 +171,8 @@ def test_without_a_map_the_run_is_bit_for_bit_the_one_before(tmp_path):
 
 def test_terminal_density_follows_the_demand(sphere_map):
     """Two halves of the ball, x > 0 of twice the demand: after a packing phase (supply alone) of
-    3000 moves per terminal at N = 200, more terminals per volume there than in the other half
-    (1.33 measured; 2 is not reached: docs/findings/demand.md), and no such excess without the map."""
+    3000 moves per terminal at N = 200, twice the terminals per volume there (2.07 measured, seed 1
+    1.90; the cost's first form gave 1.33: docs/findings/demand.md), and no excess without the map."""
     base = ("tissue=sphere", "n_terminals=200", "anneal.packing_steps_per_terminal=3000", "anneal.steps=602000")
     target = make_problem(*base, f"tissue.demand_path={sphere_map}").tissue.supply_target
 
@@ -185,7 +185,7 @@ def test_terminal_density_follows_the_demand(sphere_map):
         density = [np.count_nonzero(level == v) / np.count_nonzero(target == v) for v in (1, 2)]
         return density[1] / density[0]
 
-    assert 1.2 < ratio(f"tissue.demand_path={sphere_map}") < 2.2
+    assert 1.8 < ratio(f"tissue.demand_path={sphere_map}") < 2.2
     assert 0.85 < ratio() < 1.15
 
 

@@ -342,6 +342,7 @@ def test_extend_stage_on_a_local_cluster_best_seed_then_all_runs(heart, tmp_path
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # resume itself is covered by test_resume_after_sigkill_ends_bit_identical
 def test_sigterm_ends_the_extension_with_a_message_and_the_rerun_resumes(heart, tmp_path):
     import shutil
 

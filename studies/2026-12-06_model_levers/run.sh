@@ -19,17 +19,26 @@
 #
 # Resumable: every run is a checkpointed pipeline job; rerun the same command to continue.
 # Rows of finished runs land in OUT/rows.jsonl and are merged into rows.jsonl beside this
-# script after each part; score.py adds the anatomy of every store (inlet shares, bifurcations
-# off the heart, terminal pressures, Huo-Kassab exponents) into anatomy.jsonl.
+# script after each part; summarise.py scores every store (inlet shares, bifurcations off the
+# heart, terminal pressures, the errors against Kassab) into scored.jsonl and prints the table.
 #
-#     bash studies/2026-12-06_model_levers/run.sh [OUT [LEVER ...]]
+#     bash studies/2026-12-06_model_levers/run.sh [--dry-run] [OUT [LEVER ...]]
 #
+# --dry-run prints the commands instead of running them (the tests run that).
 # OUT defaults to results/studies/model_levers (run stores stay out of git); LEVER defaults to
 # every lever above, in order. One job at a time (--workers 1): start a second copy with other
 # levers to use both cores.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../.."
+DRY=
+[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
+run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+merge() {  # merge FROM INTO: FROM's rows appended to INTO, each row once; two copies may merge at once
+  if [ -n "$DRY" ]; then echo "# merge $1 into $2"; return; fi
+  touch "$2"
+  flock "$2" sh -c 'cat "$1" >> "$2" && sort -u -o "$2" "$2"' merge "$1" "$2"
+}
 OUT=${1:-results/studies/model_levers}
 LEVERS=("${@:2}")
 [ ${#LEVERS[@]} -gt 0 ] || LEVERS=(A A_share A_cco A_near g73 reach0 cut04 A_cut02 A_cut08 A_band cco cco_phys)
@@ -53,9 +62,7 @@ for lever in "${LEVERS[@]}"; do
     A_band) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) "${SHARE[@]}" --override tissue.inlet_share_tolerance=0.15) ;;
     *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band cco cco_phys, got '$lever'" >&2; exit 2 ;;
   esac
-  python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
+  run python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
     --label "$lever" "${o[@]}"
-  touch "$here/rows.jsonl"
-  # two copies may merge at once: one at a time
-  flock "$here/rows.jsonl" sh -c "cat '$OUT/rows.jsonl' >> '$here/rows.jsonl' && sort -u -o '$here/rows.jsonl' '$here/rows.jsonl'"
+  merge "$OUT/rows.jsonl" "$here/rows.jsonl"
 done
