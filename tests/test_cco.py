@@ -263,17 +263,17 @@ def test_exhaustive_optimum_and_fixed_terminal_anneal_never_above_cco(n, trials,
 
 
 def test_anneal_ids_and_stored_configs_are_unchanged_and_cco_ids_name_the_method(tmp_path):
-    (a,) = sweep.expand(config.compose([f"output_dir={tmp_path}"]))
+    (a,) = sweep.expand(config.compose(["model=paper", f"output_dir={tmp_path}"]))
     assert a.run_id == "heart-N200-mb641.3-s0" and a.cell == "heart-N200-mb641.3"
     assert "method" not in a.config and a.config["anneal"]["init"] == "random"
     before_cco = {**a.config, "anneal": {k: v for k, v in a.config["anneal"].items() if k != "init"}}
     assert store.config_hash(before_cco) == store.config_hash(a.config)  # stores from before CCO still resume
-    (c,) = sweep.expand(config.compose(["method=cco", f"output_dir={tmp_path}"]))
+    (c,) = sweep.expand(config.compose(["model=paper", "method=cco", f"output_dir={tmp_path}"]))
     assert c.run_id == "heart-N200-mb641.3-cco-s0" and c.coords["method"] == "cco"
     assert c.config["method"]["name"] == "cco" and "anneal" not in c.config
-    (c2,) = sweep.expand(config.compose(["method=cco", "anneal=paper", f"output_dir={tmp_path}"]))
+    (c2,) = sweep.expand(config.compose(["model=paper", "method=cco", "anneal=paper", f"output_dir={tmp_path}"]))
     assert store.config_hash(c2.config) == store.config_hash(c.config)
-    (w,) = sweep.expand(config.compose(["anneal.init=cco", f"output_dir={tmp_path}"]))
+    (w,) = sweep.expand(config.compose(["model=paper", "anneal.init=cco", f"output_dir={tmp_path}"]))
     assert w.run_id == a.run_id and w.config["anneal"]["init"] == "cco"
     assert store.config_hash(w.config) != store.config_hash(a.config)  # a warm start is a different run
 

@@ -17,9 +17,12 @@ pytestmark = pytest.mark.unit
 
 
 def test_the_schema_defaults_are_the_composed_defaults():
-    """All but the heart's exclusion grid, which its group sets: the schema's null serves every
-    tissue, so a sphere or a box built in code keeps its exclusion term on its supply grid."""
-    schema_defaults, composed = asdict(config.RunConfig()), asdict(config.compose([], check=False))
+    """The schema's defaults are the paper's model (``model=paper``; the default model's keys are
+    per tissue and method, which the schema cannot say), all but the heart's exclusion grid, which
+    its group sets: the schema's null serves every tissue, so a sphere or a box built in code
+    keeps its exclusion term on its supply grid."""
+    assert config.compose([]).model.name == "physiological"
+    schema_defaults, composed = asdict(config.RunConfig()), asdict(config.compose(["model=paper"], check=False))
     assert composed["tissue"].pop("exclusion_voxel_size") == config.HEART_EXCLUSION_VOXEL_SIZE
     assert schema_defaults["tissue"].pop("exclusion_voxel_size") is None
     assert schema_defaults == composed

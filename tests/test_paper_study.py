@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 import xarray as xr
+import zarr
 
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
@@ -54,6 +55,8 @@ def test_size_scan_runs_the_sweep_then_collects_its_small_outputs(tmp_path):
     done = study("size_scan.sh", tmp_path, "local", "sweep.n_terminals=[12,16]", *TINY)
     assert done.returncode == 0, done.stdout + done.stderr
     assert_collected(tmp_path / "paper" / "size_scan", ["heart-N12-mb641.3-s0", "heart-N16-mb641.3-s0"])
+    for path in (tmp_path / "runs" / "size_scan" / "runs").glob("*.zarr"):  # the paper's model, not the default
+        assert zarr.open_group(str(path), mode="r").attrs["config"]["physics"]["gamma"] == 2.1
     again = study("size_scan.sh", tmp_path, "local", "sweep.n_terminals=[12,16]", *TINY)  # rerun: resumes
     assert again.returncode == 0 and "2 already complete, 0 failed" in again.stdout + again.stderr, again.stderr
 

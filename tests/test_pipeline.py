@@ -356,7 +356,7 @@ def test_a_resumed_run_whose_stored_config_changed_is_refused_before_any_job(tmp
     changed = replace(cfg, physics=replace(cfg.physics, gamma=3.0))
     log = io.StringIO()
     assert orchestrate.main(changed, stream=log) == 2
-    assert "physics.gamma: 2.1 (stored) vs 3.0 (requested)" in log.getvalue()
+    assert f"physics.gamma: {cfg.physics.gamma!r} (stored) vs 3.0 (requested)" in log.getvalue()
     assert results_snapshot(tmp_path) == before
 
 

@@ -312,5 +312,5 @@ def test_identity_differences_allow_sweep_axes_and_a_second_method_only(tmp_path
         "anneal.p_swap: 0.3 (stored) vs 0.7 (requested)"
     ]
     assert store.identity_differences(base, cfg("method=cco", "physics.gamma=3.0")) == [
-        "physics.gamma: 2.1 (stored) vs 3.0 (requested)"
+        "physics.gamma: 2.3333333333333335 (stored) vs 3.0 (requested)"
     ]  # but nothing the two methods share

@@ -34,12 +34,13 @@ CLUSTER_ARGS=$(cluster_overrides "${1:-local}")
 EXTRA=("$@")
 
 # run_sweep NAME OVERRIDE...: one sweep into $RUNS_DIR/NAME (resumes when rerun; the sweep
-# reduces its runs at the end: summary.zarr, comparison CSVs, best trees, figures).
+# reduces its runs at the end: summary.zarr, comparison CSVs, best trees, figures). The paper's
+# studies run the paper's model (model=paper), whatever the package's default.
 run_sweep() {
     local name=$1
     shift
     # shellcheck disable=SC2086  # CLUSTER_ARGS holds one or two overrides
-    run "$PYTHON" -m vasc_pipeline "$@" $CLUSTER_ARGS "output_dir=$RUNS_DIR/$name" "${EXTRA[@]}"
+    run "$PYTHON" -m vasc_pipeline model=paper "$@" $CLUSTER_ARGS "output_dir=$RUNS_DIR/$name" "${EXTRA[@]}"
 }
 
 # collect NAME: copy the small outputs of $RUNS_DIR/NAME to $PAPER_DIR/NAME (not the run stores).

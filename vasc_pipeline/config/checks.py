@@ -37,7 +37,7 @@ from .schema import (
     scheduled_steps,
 )
 
-__all__ = ["validate"]
+__all__ = ["share_set_by_model", "validate"]
 
 
 def _positive(name: str, value: float) -> None:
@@ -55,6 +55,17 @@ def _check_finite(node: Any, name: str) -> None:
             _check_finite(value, f"{name}[{i}]")
     elif isinstance(node, float) and not math.isfinite(node):
         raise ConfigError(f"{name} must be a finite number, got {node}")
+
+
+def share_set_by_model(cfg) -> str:
+    """The words that say where a split the user did not set came from (``model=physiological``
+    sets the heart's for the anneal), and how to free it; empty otherwise."""
+    if cfg.model.name != "physiological" or cfg.tissue.name != "heart":
+        return ""
+    return (
+        " (model=physiological sets the heart's split for the anneal; "
+        "tissue.inlet_share=null tissue.inlet_share_tolerance=null frees it)"
+    )
 
 
 def validate(cfg: RunConfig) -> RunConfig:
@@ -121,7 +132,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         if cfg.method.name == "cco" or cfg.anneal.init == "cco":
             raise ConfigError(
                 "tissue.inlet_share fixes the terminals of every inlet, which the CCO growth (method=cco, "
-                "anneal.init=cco) assigns by connection: leave it unset (null) there"
+                "anneal.init=cco) assigns by connection: leave it unset (null) there" + share_set_by_model(cfg)
             )
     tolerance = cfg.tissue.inlet_share_tolerance
     if tolerance is not None:

@@ -190,6 +190,17 @@ def config_differences(
     return [line(k) for k in sorted(set(a) | set(b)) if not ignored(k) and a.get(k, "<absent>") != b.get(k, "<absent>")]
 
 
+# Tissue keys only the anneal reads: where its bifurcations may go and how the terminals start
+# divided between the inlets (the CCO growth places bifurcations at their optimum and divides
+# the terminals by connection).
+ANNEAL_TISSUE_KEYS = (
+    "tissue.bifurcation_reach",
+    "tissue.inlet_share",
+    "tissue.inlet_share_tolerance",
+    "tissue.inlet_assignment",
+)
+
+
 def _method(config: Mapping[str, Any]) -> str:
     return str((config.get("method") or {}).get("name") or "anneal")
 
@@ -198,10 +209,13 @@ def identity_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]
     """What keeps two runs out of one output_dir: every difference but the sweep axes.
 
     Runs of different methods (``method=cco`` beside the anneal: the comparison the
-    reduction's ``method`` dimension is for) share everything but the sections only one of
-    them uses, ``anneal`` and ``method``.
+    reduction's ``method`` dimension is for) share everything but what only one of them reads:
+    the sections ``anneal`` and ``method``, and the anneal's tissue keys
+    (:data:`ANNEAL_TISSUE_KEYS`, which a model sets for the anneal only).
     """
-    ignore = SWEEP_AXES + (("anneal.", "method.") if _method(stored) != _method(requested) else ())
+    ignore = SWEEP_AXES
+    if _method(stored) != _method(requested):
+        ignore += ("anneal.", "method.", *ANNEAL_TISSUE_KEYS)
     return config_differences(stored, requested, ignore=ignore)
 
 

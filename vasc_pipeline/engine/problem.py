@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .. import kernel
-from ..config.checks import validate
+from ..config.checks import share_set_by_model, validate
 from ..config.schema import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config
 from ..model.costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, total_cost
 from ..model.physics import Physics, cost_tables, supply_radius
@@ -106,6 +106,7 @@ def build_problem(config: Any) -> Problem:
         names = ", ".join(tissue.inlet_names)
         raise TreeError(
             f"tissue.inlet_share lists {len(share)} fractions; tissue {tissue.name!r} has {k} inlets ({names})"
+            + share_set_by_model(cfg)
         )
     p = cfg.physics
     # Field by field: the config's physics as given, plus what the problem fixes (N, K, R_supply).
