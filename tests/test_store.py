@@ -314,3 +314,17 @@ def test_identity_differences_allow_sweep_axes_and_a_second_method_only(tmp_path
     assert store.identity_differences(base, cfg("method=cco", "physics.gamma=3.0")) == [
         "physics.gamma: 2.3333333333333335 (stored) vs 3.0 (requested)"
     ]  # but nothing the two methods share
+
+
+def test_the_method_comparison_ignores_the_tissue_keys_only_the_anneal_reads(tmp_path):
+    def heart(*overrides):
+        (j,) = sweep.expand(config.compose([*overrides, "n_terminals=16", f"output_dir={tmp_path}"]))
+        return j.config
+
+    anneal, cco = heart(), heart("method=cco")  # the default model sets them for the anneal only
+    assert anneal["tissue"]["inlet_share"] == [0.62, 0.38] and anneal["tissue"]["bifurcation_reach"] == 0.0
+    assert cco["tissue"].get("inlet_share") is None and cco["tissue"].get("bifurcation_reach") is None
+    assert store.identity_differences(anneal, cco) == []
+    assert store.identity_differences(anneal, heart("tissue.bifurcation_reach=0.001")) == [
+        "tissue.bifurcation_reach: 0.0 (stored) vs 0.001 (requested)"
+    ]  # between two anneals they count

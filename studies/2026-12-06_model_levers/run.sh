@@ -62,7 +62,8 @@ for lever in "${LEVERS[@]}"; do
     A_band) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) "${SHARE[@]}" --override tissue.inlet_share_tolerance=0.15) ;;
     *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band cco cco_phys, got '$lever'" >&2; exit 2 ;;
   esac
+  # every lever is a change to the paper's model (the package's default is the physiological one)
   run python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
-    --label "$lever" "${o[@]}"
+    --label "$lever" --override model=paper "${o[@]}"
   merge "$OUT/rows.jsonl" "$here/rows.jsonl"
 done
