@@ -31,12 +31,14 @@ from .problem import (
 from .run import (
     RunResult,
     Trace,
+    TraceRecord,
     accepted_moves,
     anneal_blocks,
     finish,
     run,
     run_block,
     run_phase,
+    trace_record,
 )
 
 __all__ = [
@@ -56,6 +58,8 @@ __all__ = [
     "CHECKPOINT_FIELDS",
     "RunResult",
     "Trace",
+    "TraceRecord",
+    "trace_record",
     "run_block",
     "run_phase",
     "anneal_blocks",

@@ -24,7 +24,7 @@ from ..kernel import packing
 from ..model.costs import COST_TERMS, full_costs, vascular_cost
 from ..model.rng import next_double
 from ..model.tree import Tree
-from ..store.run_store import TRACE_FIELDS
+from ..store.trace import Trace, TraceRecord
 from .parts import anneal_parts, make_parts, merge_parts, phase_ends
 from .polish import descend_swaps, polish
 from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
@@ -32,6 +32,8 @@ from .problem import Problem, build_problem, initial_state, node_radii, running_
 __all__ = [
     "RunResult",
     "Trace",
+    "TraceRecord",
+    "trace_record",
     "run_block",
     "run_phase",
     "anneal_blocks",
@@ -106,27 +108,17 @@ def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable
         run_block(problem, state, rest)
 
 
-class Trace:
-    """Cost trace records, one per block: step, temperature, cost terms, acceptance."""
-
-    names = tuple(f[0] for f in TRACE_FIELDS)
-
-    def __init__(self) -> None:
-        self.rows: list[tuple] = []
-
-    def record(self, problem: Problem, state: kernel.State, proposed: int, accepted: int) -> None:
-        step = int(state.counters[kernel.COUNTER_STEP])
-        costs = running_costs(problem, state)
-        temp = kernel.temperature(problem.model, state, max(step - 1, 0))
-        self.rows.append(
-            (step, temp, *(costs[c] for c in COST_TERMS), costs["total"], accepted / proposed if proposed else 0.0)
-        )
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        data = np.array(self.rows, dtype=np.float64).reshape(-1, len(self.names))
-        out = {name: data[:, i] for i, name in enumerate(self.names)}
-        out["step"] = out["step"].astype(np.int64)
-        return out
+def trace_record(problem: Problem, state: kernel.State, proposed: int, accepted: int) -> TraceRecord:
+    """The trace record of the state after a block of ``proposed`` proposals, ``accepted`` of them taken."""
+    step = int(state.counters[kernel.COUNTER_STEP])
+    costs = running_costs(problem, state)
+    return TraceRecord(
+        step=step,
+        temperature=kernel.temperature(problem.model, state, max(step - 1, 0)),
+        **{term: costs[term] for term in COST_TERMS},
+        total=costs["total"],
+        acceptance=accepted / proposed if proposed else 0.0,
+    )
 
 
 def accepted_moves(state: kernel.State) -> int:
@@ -159,7 +151,7 @@ def anneal_blocks(
             if ends is not None:  # the packing phase's last block ends where the phases begin
                 n = min(n, int(problem.model.pack_steps) - step)
             run_block(problem, state, n)
-        trace.record(problem, state, n, accepted_moves(state) - before)
+        trace.append(trace_record(problem, state, n, accepted_moves(state) - before))
         yield step + n
 
 
@@ -218,7 +210,7 @@ def run(
     state = initial_state(problem, seed)
     block = int(block_steps or problem.config.anneal.trace_every)
     trace = Trace()
-    trace.record(problem, state, 0, 0)
+    trace.append(trace_record(problem, state, 0, 0))
     for step in anneal_blocks(problem, state, trace, block, part_map):
         if progress is not None:
             progress(step, problem.total_steps, running_costs(problem, state))

@@ -147,7 +147,7 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
 
         trace = engine.Trace()
         if checkpoint is None:
-            trace.record(problem, state, 0, 0)
+            trace.append(engine.trace_record(problem, state, 0, 0))
         total = problem.total_steps
         block = int(problem.config.anneal.trace_every)
         every = float(problem.config.checkpoint.every_seconds)
@@ -166,14 +166,14 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
                     "cell": job.cell,
                     "step": step,
                     "total_steps": total,
-                    "cost": float(trace.rows[-1][-2]),
+                    "cost": float(trace.last.total),
                 }
                 if ends is not None:  # phases done, phases, parts
                     msg["phase"] = [int(np.searchsorted(ends, step, side="right")), len(ends), parts]
                 report(msg)
             if time.perf_counter() - last_checkpoint >= every and step < total:
                 trace_length = store.append_trace(trace.arrays(), trace_length)
-                trace.rows.clear()  # the same Trace: anneal_blocks records into it
+                trace.clear()  # the same Trace: anneal_blocks records into it
                 store.write_checkpoint(
                     engine.state_arrays(state), step=step, trace_length=trace_length, wall_seconds=wall()
                 )
