@@ -53,10 +53,12 @@ from .outdir import OutputDirCallback
 from .planning import Plan, check_one_configuration, create_stores, inspect_stores, plan
 from .progress import PROGRESS_TOPIC, Progress, print_summary, runs_phrase
 from .sweep import Job
+from .sweep_result import SweepResult
 
 __all__ = [  # with the planning, cluster, progress and outdir names it uses (re-exported: public API)
     "main",
     "run_sweep",
+    "SweepResult",
     "reduce_stage",
     "plan",
     "Plan",
@@ -272,7 +274,7 @@ def run_sweep(
     stream: TextIO | None = None,
     progress_interval: float | None = None,
     reduce: bool = True,
-) -> dict[str, Any]:
+) -> SweepResult:
     """Run every unfinished job of the sweep (or single run) described by ``cfg``.
 
     Parameters
@@ -291,7 +293,7 @@ def run_sweep(
 
     Returns
     -------
-    dict
+    SweepResult
         ``output_dir``, ``runs`` (job summaries of this call, see
         :func:`vasc_pipeline.pipeline.job.run_job`), ``complete``, ``resumed``, ``skipped`` (run ids),
         ``failed`` ({run_id: error text}), ``deterministic`` (the failed run ids whose job
@@ -328,16 +330,7 @@ def run_sweep(
         )
         for run_id, why in p.damaged.items():
             stream.write(f"  left out: {run_id}: {why}\n")
-        result: dict[str, Any] = {
-            "output_dir": str(p.output_dir),
-            "runs": [],
-            "complete": [],
-            "resumed": [],
-            "skipped": sorted(p.complete),
-            "failed": {},
-            "deterministic": set(),
-            "damaged": dict(p.damaged),
-        }
+        result = SweepResult(output_dir=str(p.output_dir), skipped=sorted(p.complete), damaged=dict(p.damaged))
         if pending:
             compile_kernels(pending, stream)
             with contextlib.ExitStack() as stack:
@@ -402,15 +395,14 @@ def run_sweep(
                 finally:
                     client.unsubscribe_topic(PROGRESS_TOPIC)
                     progress.close()
-    result["wall_seconds"] = time.monotonic() - started
+    result.wall_seconds = time.monotonic() - started
     print_summary(result, p, stream)
-    result["reduction"], result["reduction_error"] = None, None
-    if reduce and len(set(result["complete"]) | set(result["skipped"])) == len(p.jobs):
-        result["reduction"], result["reduction_error"] = _reduce_after_sweep(p.output_dir, stream)
+    if reduce and len(result.done) == len(p.jobs):
+        result.reduction, result.reduction_error = _reduce_after_sweep(p.output_dir, stream)
     return result
 
 
-def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
+def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> SweepResult:
     """cluster.dry_run: print the planned runs (and SLURM's job script); no store, no job, no output_dir lock."""
     inspect_stores(p)  # read-only: what a sweep would skip, resume or refuse
     lines = [f"vasc_pipeline: dry run: {runs_phrase(len(p.pending))} of {len(p.jobs)} would run into {p.output_dir}:"]
@@ -433,20 +425,7 @@ def _dry_run(cfg: RunConfig, p: Plan, stream: TextIO) -> dict[str, Any]:
         ]
     stream.write("\n".join(lines) + "\n")
     stream.flush()
-    return {
-        "output_dir": str(p.output_dir),
-        "runs": [],
-        "complete": [],
-        "resumed": [],
-        "skipped": [],
-        "failed": {},
-        "deterministic": set(),
-        "damaged": {},
-        "wall_seconds": 0.0,
-        "reduction": None,
-        "reduction_error": None,
-        "dry_run": True,
-    }
+    return SweepResult(output_dir=str(p.output_dir), dry_run=True)
 
 
 def _reduce_after_sweep(output_dir: Path, stream: TextIO) -> tuple[Any, str | None]:
@@ -543,28 +522,28 @@ def _wait_some(wait, futures: set, timeout: float) -> tuple[set, set]:
     return set(done), set(not_done)
 
 
-def _collect(fut: Any, job: Job, progress: Progress, result: dict) -> None:
+def _collect(fut: Any, job: Job, progress: Progress, result: SweepResult) -> None:
     if fut.status == "finished" and fut.result().get("status") == "failed":  # raised: see _dask_run_job
         summary = fut.result()
-        result["failed"][job.run_id] = summary["error"]
-        result["deterministic"].add(job.run_id)
+        result.failed[job.run_id] = summary["error"]
+        result.deterministic.add(job.run_id)
         progress.failed(job.run_id, f"{summary['error']} (deterministic: a rerun fails the same way)")
     elif fut.status == "finished":
         summary = fut.result()
-        result["runs"].append(summary)
+        result.runs.append(summary)
         if summary["status"] == "skipped":
-            result["skipped"].append(job.run_id)
+            result.skipped.append(job.run_id)
         else:
-            result["complete"].append(job.run_id)
+            result.complete.append(job.run_id)
             if summary["resumed_from"]:
-                result["resumed"].append(job.run_id)
+                result.resumed.append(job.run_id)
         progress.finished(summary)
     else:
         exc = fut.exception()
         error = f"{type(exc).__name__}: {exc}"
         if type(exc).__name__ == "KilledWorker":
             error += " (its worker process died each time: a crash, or out of memory)"
-        result["failed"][job.run_id] = error
+        result.failed[job.run_id] = error
         progress.failed(job.run_id, error)
 
 
@@ -631,8 +610,8 @@ def main(cfg: Any, stream: TextIO | None = None) -> int:
             f"vasc_pipeline: error: {exc}. Stores already created resume when the same command is run again.\n"
         )
         return 1
-    if result.get("dry_run"):
+    if result.dry_run:
         return 0
-    reduction = result["reduction"]
-    reduction_failed = result["reduction_error"] or (reduction is not None and (reduction.errors or reduction.damaged))
-    return 1 if result["failed"] or result["damaged"] or reduction_failed else 0
+    reduction = result.reduction
+    reduction_failed = result.reduction_error or (reduction is not None and (reduction.errors or reduction.damaged))
+    return 1 if result.failed or result.damaged or reduction_failed else 0
