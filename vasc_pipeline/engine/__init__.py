@@ -29,6 +29,7 @@ from .problem import (
     tree_statistics,
 )
 from .run import (
+    BlockHook,
     RunResult,
     Trace,
     TraceRecord,
@@ -57,6 +58,7 @@ __all__ = [
     "supply_dtype",
     "CHECKPOINT_FIELDS",
     "RunResult",
+    "BlockHook",
     "Trace",
     "TraceRecord",
     "trace_record",

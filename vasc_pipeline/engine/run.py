@@ -34,6 +34,7 @@ __all__ = [
     "Trace",
     "TraceRecord",
     "trace_record",
+    "BlockHook",
     "run_block",
     "run_phase",
     "anneal_blocks",
@@ -53,7 +54,7 @@ class RunResult:
     costs_recomputed: dict[str, float]
     steps: int
     wall_seconds: float
-    trace: dict[str, np.ndarray] = field(repr=False)
+    trace: dict[str, np.ndarray] = field(repr=False)  # records not taken by run's on_block (all, without one)
     counters: np.ndarray = field(repr=False)
     anneal: dict[str, Any] = field(default_factory=dict)  # schedule as run, final step sizes, polish report
     statistics: dict[str, float] = field(default_factory=dict)  # tree_statistics of the final tree
@@ -189,13 +190,19 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
     return report
 
 
+BlockHook = Callable[[int, kernel.State, Trace], None]
+
+
 def run(
-    config: Any,
+    config: Any = None,
     seed: int | None = None,
     *,
     block_steps: int | None = None,
     progress: Callable[[int, int, dict], None] | None = None,
     part_map: Callable = map,
+    on_block: BlockHook | None = None,
+    problem: Problem | None = None,
+    state: kernel.State | None = None,
 ) -> RunResult:
     """Grow one tree from (config, seed) and return it with running and recomputed costs.
 
@@ -203,17 +210,29 @@ def run(
     sets the trace resolution; it does not change the result. ``progress(step, total,
     costs)`` is called after every block. ``part_map`` runs the parts of an ``anneal.parts`` > 1
     anneal (:func:`anneal_blocks`); it does not change the result.
+
+    ``on_block(step, state, trace)`` is called after every block too, with the step count,
+    the state and the trace (its last record the block's): a caller that checkpoints there
+    takes the trace's records (:meth:`~vasc_pipeline.store.trace.Trace.take`), and the
+    result's ``trace`` then holds only the records after the last one taken. ``problem``
+    is ``build_problem(config)`` when the caller has it already (``config`` is then not
+    needed); ``state`` continues a restored state (:func:`restore_state`) instead of starting
+    from ``initial_state(problem, seed)``. The trace's first record is that of the state
+    before any proposal, so a state past step 0 (resumed) adds none: its store has it.
     """
     start = time.perf_counter()
-    problem = build_problem(config)
+    problem = build_problem(config) if problem is None else problem
     seed = problem.config.seed if seed is None else int(seed)
-    state = initial_state(problem, seed)
+    state = initial_state(problem, seed) if state is None else state
     block = int(block_steps or problem.config.anneal.trace_every)
     trace = Trace()
-    trace.append(trace_record(problem, state, 0, 0))
+    if int(state.counters[kernel.COUNTER_STEP]) == 0:
+        trace.append(trace_record(problem, state, 0, 0))
     for step in anneal_blocks(problem, state, trace, block, part_map):
         if progress is not None:
             progress(step, problem.total_steps, running_costs(problem, state))
+        if on_block is not None:
+            on_block(step, state, trace)
     report = finish(problem, state)
     tree = tree_of(problem, state)
     return RunResult(
