@@ -27,7 +27,16 @@ from ..model.tree import Tree
 from ..store.trace import Trace, TraceRecord
 from .parts import anneal_parts, make_parts, merge_parts, phase_ends
 from .polish import descend_swaps, polish
-from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
+from .problem import (
+    Problem,
+    build_problem,
+    initial_state,
+    model_at,
+    node_radii,
+    running_costs,
+    tree_of,
+    tree_statistics,
+)
 
 __all__ = [
     "RunResult",
@@ -73,16 +82,16 @@ def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
     n = int(n_steps)
     coarse = min(n, problem.coarse_steps - int(state.counters[kernel.COUNTER_STEP]))
     if coarse > 0:
-        _run_model(problem.coarse_model, state, coarse)
+        _run_model(problem.coarse_model, state, coarse, problem.schedule.pack)
         n -= coarse
         if state.counters[kernel.COUNTER_STEP] == problem.coarse_steps:
             kernel.recompute_exclusion(problem.model, state)
     if n > 0:
-        _run_model(problem.model, state, n)
+        _run_model(problem.model, state, n, problem.schedule.pack)
 
 
-def _run_model(model: kernel.Model, state: kernel.State, n: int) -> None:
-    if state.counters[kernel.COUNTER_STEP] < model.pack_steps:
+def _run_model(model: kernel.Model, state: kernel.State, n: int, pack: int) -> None:
+    if state.counters[kernel.COUNTER_STEP] < pack:
         n -= packing.pack_block(model, state, n)
     if n > 0:
         kernel.anneal_block(model, state, n)
@@ -97,7 +106,7 @@ def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable
     running the parts; then the rest on the whole tree (:func:`run_block`)."""
     a = problem.config.anneal
     step = int(state.counters[kernel.COUNTER_STEP])
-    model = problem.coarse_model if step < problem.coarse_steps else problem.model
+    model = model_at(problem, step)
     for leaves in (False, True):  # subtrees (their bifurcations and topology), then terminals by place
         shift = np.array([next_double(state.rng) for _ in range(3)])
         phase_seed = int(next_double(state.rng) * 2.0**53)
@@ -144,13 +153,13 @@ def anneal_blocks(
     ends = phase_ends(problem) if problem.config.anneal.parts > 1 else None
     while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
         before = accepted_moves(state)
-        if ends is not None and step >= problem.model.pack_steps:
+        if ends is not None and step >= problem.schedule.pack:
             n = int(ends[np.searchsorted(ends, step, side="right")]) - step
             run_phase(problem, state, n, part_map)
         else:
             n = min(block - step % block, total - step)
             if ends is not None:  # the packing phase's last block ends where the phases begin
-                n = min(n, int(problem.model.pack_steps) - step)
+                n = min(n, problem.schedule.pack - step)
             run_block(problem, state, n)
         trace.append(trace_record(problem, state, n, accepted_moves(state) - before))
         yield step + n
