@@ -25,7 +25,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 from vasc_pipeline import config, engine, sweep
-from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline import orchestrate, warmup
 
 
 def _direct(job_config: dict, seed: int) -> float:
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
             ]
         )
         jobs = sweep.expand(cfg)
-        orchestrate.compile_kernels()
+        warmup.compile_kernels()
 
         def direct_run() -> tuple[float, list[float]]:
             start = time.perf_counter()
