@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import engine, kernel
 from ..engine.parts import phase_ends
-from ..store.run_store import STATUS_COMPLETE, CheckpointWarning, RunStore, is_empty_leftover, run_lock
+from ..store.run_store import STATUS_COMPLETE, Checkpoint, CheckpointWarning, RunStore, is_empty_leftover, run_lock
 from ..store.trace import Trace
 from .sweep import Job
 
@@ -128,12 +128,7 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
         if problem.config.method.name == "cco":
             return _run_cco(job, problem, store, started, cpu_started, report)
 
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", CheckpointWarning)
-            checkpoint = store.load_checkpoint()
-        for w in caught:  # re-emit for the caller's log, and keep the text for the summary
-            seen.append(str(w.message))
-            warnings.warn(w.message, w.category, stacklevel=2)
+        checkpoint = _load_checkpoint(store, seen)
         store.record_resume(checkpoint)
         if checkpoint is None:
             state = engine.initial_state(problem, job.coords["seed"])
@@ -173,6 +168,18 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
             seen,
             time.process_time() - cpu_started,
         )
+
+
+def _load_checkpoint(store: RunStore, seen: list[str]) -> Checkpoint | None:
+    """The store's last good checkpoint (None: a fresh start); each fallback's warning is
+    re-emitted for the caller's log, and its text kept in ``seen`` for the summary."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CheckpointWarning)
+        checkpoint = store.load_checkpoint()
+    for w in caught:
+        seen.append(str(w.message))
+        warnings.warn(w.message, w.category, stacklevel=3)
+    return checkpoint
 
 
 class StoreHook:
