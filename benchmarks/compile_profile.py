@@ -77,7 +77,7 @@ def _name(data: dict) -> str:
 def warm_up(overrides: list[str]) -> Callable[[], None]:
     """The orchestrator's warm-up for the jobs of ``overrides``."""
     from vasc_pipeline import config, sweep
-    from vasc_pipeline.pipeline.orchestrate import compile_kernels
+    from vasc_pipeline.pipeline.warmup import compile_kernels
 
     jobs = sweep.expand(config.compose(overrides))
     return lambda: compile_kernels(jobs)

@@ -25,7 +25,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 from vasc_pipeline import config, engine, sweep
-from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline import orchestrate, warmup
 
 
 def _direct(job_config: dict, seed: int) -> float:
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
             ]
         )
         jobs = sweep.expand(cfg)
-        orchestrate.compile_kernels()
+        warmup.compile_kernels()
 
         def direct_run() -> tuple[float, list[float]]:
             start = time.perf_counter()
@@ -83,12 +83,12 @@ def main(argv: list[str] | None = None) -> None:
         start = time.perf_counter()
         result = orchestrate.run_sweep(cfg, stream=io.StringIO())
         pipeline = time.perf_counter() - start
-        assert not result["failed"] and len(result["complete"]) == len(jobs), result
+        assert not result.failed and len(result.complete) == len(jobs), result
         direct_b, engine_b = direct_run()
         direct = 0.5 * (direct_a + direct_b)
         engine_seconds = [0.5 * (a + b) for a, b in zip(engine_a, engine_b)]
 
-    session = {r["run_id"]: r["session_seconds"] for r in result["runs"]}
+    session = {r["run_id"]: r["session_seconds"] for r in result.runs}
     in_job = [session[j.run_id] / t - 1.0 for j, t in zip(jobs, engine_seconds)]
     print(
         f"{len(jobs)} runs of {args.steps:.3g} proposals, N = {args.n_terminals}, {args.workers} workers, "

@@ -211,7 +211,11 @@ def run_late_exclusion(n, seed, total, args):
     problem = problem_of(n, total, [])
     state = engine.initial_state(problem, seed)  # the schedule calibrated on the true cost
     switch = int(round(args.exclusion_off_share * total))
-    blind = dataclasses.replace(problem, model=problem.model._replace(exclusion_on=False), total_steps=switch)
+    blind = dataclasses.replace(
+        problem,
+        model=problem.model._replace(exclusion_on=False),
+        schedule=dataclasses.replace(problem.schedule, total=switch),
+    )
     kernel.initialise(blind.model, state)  # running sums without the exclusion term
     anneal_to_end(blind, state)
     middle = time.perf_counter()
@@ -264,7 +268,8 @@ def run_coarse_grid(n, seed, total, args):
         step_max=m.step_max,
     )
     switch = int(round(args.coarse_grid_share * total))
-    coarse = dataclasses.replace(coarse, model=coarse_model, total_steps=switch)
+    shortened = dataclasses.replace(coarse.schedule, total=switch)
+    coarse = dataclasses.replace(coarse, model=coarse_model, schedule=shortened)
     state = moved_state(problem, state, coarse)
     anneal_to_end(coarse, state)
     middle = time.perf_counter()

@@ -330,10 +330,10 @@ def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     cfg = config.compose([*grid, "method=cco"])
     result = orchestrate.run_sweep(cfg, stream=io.StringIO())
     jobs = sweep.expand(cfg)
-    assert sorted(result["complete"]) == sorted(j.run_id for j in jobs) and result["failed"] == {}
-    assert result["reduction_error"] is None
+    assert sorted(result.complete) == sorted(j.run_id for j in jobs) and result.failed == {}
+    assert result.reduction_error is None
     again = orchestrate.run_sweep(cfg, stream=io.StringIO())  # the same command skips every complete run
-    assert again["runs"] == [] and len(again["skipped"]) == len(jobs)
+    assert again.runs == [] and len(again.skipped) == len(jobs)
     for j in jobs:
         assert j.run_id.endswith(f"-cco-s{j.coords['seed']}")
         s = store.RunStore.open(j.store, mode="r")

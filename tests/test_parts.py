@@ -174,7 +174,7 @@ def test_a_sweep_runs_one_tree_in_parts_on_the_clusters_workers(tmp_path):
     cluster = ["cluster.n_workers=2", "cluster.dashboard_address=null", "sweep.seeds=[0,1]"]
     cfg = config.compose([*overrides, f"output_dir={tmp_path}", *cluster])
     result = orchestrate.run_sweep(cfg, stream=log, progress_interval=0.0, reduce=False)
-    assert len(result["complete"]) == 2 and not result["failed"], log.getvalue()
+    assert len(result.complete) == 2 and not result.failed, log.getvalue()
     assert "phase " in log.getvalue() and " in 2 parts" in log.getvalue(), log.getvalue()
     for seed in (0, 1):
         (store,) = (tmp_path / "runs").glob(f"*-s{seed}.zarr")

@@ -118,8 +118,8 @@ def test_smoke_end_to_end_on_a_local_cluster(tmp_path):
     cfg = small(tmp_path, "cluster.n_workers=2")
     log = io.StringIO()
     result = orchestrate.run_sweep(cfg, stream=log, progress_interval=0.5)
-    assert sorted(result["complete"]) == sorted(j.run_id for j in sweep.expand(cfg))
-    assert result["failed"] == {} and result["resumed"] == []
+    assert sorted(result.complete) == sorted(j.run_id for j in sweep.expand(cfg))
+    assert result.failed == {} and result.resumed == []
     text = log.getvalue()
     assert "runs 4/4" in text and "steps/s" in text and "ETA" in text and "best cost per cell: sphere-N16" in text
     assert "4 completed now" in text and str(tmp_path / "runs") in text
@@ -127,7 +127,7 @@ def test_smoke_end_to_end_on_a_local_cluster(tmp_path):
     # Running the same command again skips every complete run and starts no cluster.
     before = results_snapshot(tmp_path)
     again = orchestrate.run_sweep(cfg, stream=io.StringIO())
-    assert again["runs"] == [] and len(again["skipped"]) == 4
+    assert again.runs == [] and len(again.skipped) == 4
     assert results_snapshot(tmp_path) == before
 
 
@@ -205,8 +205,8 @@ def test_a_killed_worker_resumes_its_job_from_the_checkpoint(tmp_path):
         thread.join(TIMEOUT)
     assert "error" not in outcome, outcome.get("error")
     result = outcome["result"]
-    assert result["failed"] == {} and len(result["complete"]) == 4
-    summary = next(r for r in result["runs"] if r["run_id"] == victim.name.removesuffix(".zarr"))
+    assert result.failed == {} and len(result.complete) == 4
+    summary = next(r for r in result.runs if r["run_id"] == victim.name.removesuffix(".zarr"))
     assert summary["resumed_from"] and summary["resumed_from"] > 0  # from its checkpoint, not step 0
     assert summary["session_steps"] == 300000 - summary["resumed_from"]
     assert_runs_match_references(cfg)
@@ -253,7 +253,7 @@ def test_an_existing_scheduler_by_address_gives_the_same_results(tmp_path):
             client.wait_for_workers(2, timeout=120)
         cfg = small(tmp_path, "cluster=address", f"cluster.address={address}")
         result = orchestrate.run_sweep(cfg, stream=io.StringIO())
-        assert result["failed"] == {} and len(result["complete"]) == 4
+        assert result.failed == {} and len(result.complete) == 4
         assert_runs_match_references(cfg)
     finally:
         for p in reversed(procs):

@@ -375,15 +375,15 @@ def test_sweep_reduces_at_the_end_and_a_failed_reduction_loses_no_run(tmp_path, 
     ):
         stream = io.StringIO()
         result = orchestrate.run_sweep(cfg, client=client, stream=stream)
-    assert sorted(result["complete"]) == [j.run_id for j in sweep.expand(cfg)]
-    assert result["reduction"] is None and "figure backend exploded" in result["reduction_error"]
+    assert sorted(result.complete) == [j.run_id for j in sweep.expand(cfg)]
+    assert result.reduction is None and "figure backend exploded" in result.reduction_error
     assert "+stage=reduce" in stream.getvalue()
     assert not (tmp_path / "summary.zarr").exists()
     monkeypatch.undo()
     # rerun: every run is complete (none re-run), and the reduction now succeeds
     result = orchestrate.run_sweep(cfg, stream=io.StringIO())
-    assert result["complete"] == [] and len(result["skipped"]) == 2
-    assert result["reduction_error"] is None and result["reduction"].summary_path == tmp_path / "summary.zarr"
+    assert result.complete == [] and len(result.skipped) == 2
+    assert result.reduction_error is None and result.reduction.summary_path == tmp_path / "summary.zarr"
     assert xr.open_zarr(tmp_path / "summary.zarr", group="morphometry")["n_seeds"].values.tolist() == [[2]]
 
 

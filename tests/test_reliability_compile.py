@@ -11,7 +11,7 @@ import time
 
 from helpers import ENV, REPO, TINY_RUN
 
-from vasc_pipeline.pipeline import orchestrate
+from vasc_pipeline.pipeline import orchestrate, warmup
 
 # In a fresh process: warm up for the jobs of a sweep on `anneal=fast` (the default preset: a
 # calibrated T_start, adapted steps, a coarse exclusion map), then run one of those jobs, and list
@@ -58,19 +58,19 @@ def test_the_warm_up_compiles_every_kernel_the_jobs_use():
 
 
 def test_a_slow_compilation_is_announced_while_it_happens(monkeypatch):
-    monkeypatch.setattr(orchestrate, "COMPILE_NOTICE_AFTER", 0.05)
-    monkeypatch.setattr(orchestrate, "_warm_up", lambda jobs: time.sleep(1.0))
+    monkeypatch.setattr(warmup, "COMPILE_NOTICE_AFTER", 0.05)
+    monkeypatch.setattr(warmup, "_warm_up", lambda jobs: time.sleep(1.0))
     log = io.StringIO()
-    orchestrate.compile_kernels(["a job"], log)
+    warmup.compile_kernels(["a job"], log)
     lines = log.getvalue().splitlines()
     assert lines[0].startswith("vasc_pipeline: compiling the numba kernels (first run only"), lines
     assert lines[1].startswith("vasc_pipeline: kernels compiled in "), lines
 
 
 def test_loading_the_cached_kernels_says_nothing(monkeypatch):
-    monkeypatch.setattr(orchestrate, "_warm_up", lambda jobs: None)
+    monkeypatch.setattr(warmup, "_warm_up", lambda jobs: None)
     log = io.StringIO()
-    orchestrate.compile_kernels(["a job"], log)
+    warmup.compile_kernels(["a job"], log)
     assert log.getvalue() == ""
 
 
@@ -93,13 +93,13 @@ def test_a_sigterm_while_compiling_ends_the_wait(monkeypatch):
                 pass
         finished.set()
 
-    monkeypatch.setattr(orchestrate, "_warm_up", swallowing_warm_up)
+    monkeypatch.setattr(warmup, "_warm_up", swallowing_warm_up)
     terminated: list[int] = []
     timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
     with orchestrate._terminate_as_interrupt(terminated):
         timer.start()
         try:
-            orchestrate.compile_kernels(["a job"], io.StringIO())
+            warmup.compile_kernels(["a job"], io.StringIO())
         except KeyboardInterrupt:
             interrupted = True
         else:

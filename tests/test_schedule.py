@@ -369,3 +369,19 @@ def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
         result = engine.run(config.compose(overrides), seed=seed)
         c = result.costs_recomputed
         assert (c["volume"] + c["power"]) == pytest.approx(best, rel=1e-6), seed
+
+
+def test_the_schedule_is_computed_once_and_the_kernel_model_copies_it():
+    problem = make_problem(
+        "tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", "anneal.packing_steps_per_terminal=250"
+    )
+    s, m, a = problem.schedule, problem.model, problem.config.anneal
+    assert (s.total, s.pack, s.tree) == (60_000, 10_000, 50_000) == (problem.total_steps, m.pack_steps, 50_000)
+    kernel_steps = (m.total_steps, m.cold_steps, m.supply_steps, m.full_width_steps)
+    assert kernel_steps == (s.total, s.cold, s.supply, s.full_width)
+    assert s.cold == round((1 - a.cold_share) * s.tree) and s.full_width == round(a.full_width_phase * s.tree)
+    assert problem.coarse_steps == s.coarse == s.pack + round(a.coarse_exclusion_phase * s.tree)
+    assert s == config.Schedule.of(problem.config, exclusion=True)
+    assert config.Schedule.of(problem.config, exclusion=False).coarse == 0  # the coarse map serves exclusion alone
+    four = dataclasses.replace(s, part_phases=4)
+    np.testing.assert_array_equal(four.phase_ends(), [22_500, 30_000, 35_000, 47_500, 60_000])

@@ -88,6 +88,22 @@ def test_config_hash_ignores_where_and_how_often_but_not_physics(tmp_path):
         s.check_config({**base, "anneal": {"T_end": 1e-8}})
 
 
+def test_trace_records_are_built_and_read_by_name_and_become_the_store_columns(tmp_path):
+    trace = store.Trace()
+    for k in range(3):
+        values = {name: float(k) for name in store.TRACE_NAMES}
+        trace.append(store.TraceRecord(**{**values, "step": 10 * k}))
+    assert trace.last.step == 20 and trace.last.total == 2.0 and len(trace) == 3
+    arrays = trace.arrays()
+    assert list(arrays) == list(store.TRACE_NAMES) == [f[0] for f in store.TRACE_FIELDS]
+    assert {name: str(a.dtype) for name, a in arrays.items()} == {f[0]: f[1] for f in store.TRACE_FIELDS}
+    s = new_store(tmp_path)
+    s.write_checkpoint(state_like(), step=20, trace_length=s.append_trace(arrays, 0), wall_seconds=1.0)
+    np.testing.assert_array_equal(s.read_trace()["step"], [0, 10, 20])
+    trace.clear()
+    assert len(trace) == 0 and all(a.shape == (0,) for a in trace.arrays().values())
+
+
 def test_trace_commit_and_cut_back_after_a_crash_between_resize_and_write(tmp_path):
     s = new_store(tmp_path)
     rows = {name: np.arange(3, dtype=dtype) for name, dtype, *_ in store.TRACE_FIELDS}

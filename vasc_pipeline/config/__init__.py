@@ -6,7 +6,8 @@
 :mod:`~vasc_pipeline.config.pipeline`: the sweep and cluster groups;
 :mod:`~vasc_pipeline.config.frozen`: a validated config is frozen (checked once, then only read);
 :mod:`~vasc_pipeline.config.rules`: one rule per key a sweep can scan;
-:mod:`~vasc_pipeline.config.identity`: which part of a config determines a result.
+:mod:`~vasc_pipeline.config.identity`: which part of a config determines a result;
+:mod:`~vasc_pipeline.config.schedule`: a run's phases in steps (:class:`Schedule`).
 """
 
 from .checks import validate
@@ -19,6 +20,7 @@ from .compose import (
     with_sweep_group,
 )
 from .rules import MAX_STEPS, MAX_TERMINALS, SEED_ACCEPTED, seed_ok
+from .schedule import Schedule, packing_steps, scheduled_steps
 from .schema import (  # the former config module's other names, outside its __all__
     ANNEAL_INITS,
     CONFIG_DIR,
@@ -56,8 +58,6 @@ from .schema import (  # the former config module's other names, outside its __a
     TLSConfig,
     from_stored,
     organ_of,
-    packing_steps,
-    scheduled_steps,
     sweep_axis,
     to_run_config,
 )
@@ -94,6 +94,7 @@ __all__ = [
     "organ_of",
     "scheduled_steps",
     "packing_steps",
+    "Schedule",
     "CONFIG_DIR",
     "compose",
     "integral_counts",

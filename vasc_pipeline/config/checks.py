@@ -15,6 +15,7 @@ from typing import Any
 from .errors import ConfigError
 from .frozen import _freeze, is_frozen, thawed
 from .rules import MAX_STEPS, MAX_TERMINALS, SEED_ACCEPTED, SWEPT_KEYS, seed_ok, sweep_axis
+from .schedule import packing_steps, scheduled_steps
 from .schema import (
     ANNEAL_INITS,
     EXTEND_RUNS,
@@ -33,8 +34,6 @@ from .schema import (
     LabelsConfig,
     RunConfig,
     TissueConfig,
-    packing_steps,
-    scheduled_steps,
 )
 
 __all__ = ["share_set_by_model", "validate"]

@@ -4,7 +4,7 @@ Part of the schema of :class:`vasc_pipeline.config.RunConfig` (its ``sweep`` and
 fields; :mod:`vasc_pipeline.config` re-exports these dataclasses), but not of a run's
 identity (:mod:`vasc_pipeline.config.identity` leaves them out): they say how a sweep is organised,
 not what a run computes. :mod:`vasc_pipeline.pipeline.sweep` expands the grid,
-:mod:`vasc_pipeline.pipeline.orchestrate` and :mod:`vasc_pipeline.pipeline.cluster` fan the jobs out.
+:mod:`vasc_pipeline.pipeline.dispatch` and :mod:`vasc_pipeline.pipeline.cluster` fan the jobs out.
 """
 
 from __future__ import annotations

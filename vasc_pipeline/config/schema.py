@@ -46,8 +46,6 @@ __all__ = [  # with the pipeline's groups of vasc_pipeline.config.pipeline (re-e
     "HEART_EXCLUSION_VOXEL_SIZE",
     "ORGANS",
     "organ_of",
-    "scheduled_steps",
-    "packing_steps",
     "CONFIG_DIR",
 ]
 
@@ -385,20 +383,3 @@ def from_stored(stored: Any) -> RunConfig:
         if isinstance(node, dict) and key not in node:
             node[key] = neutral
     return to_run_config(stored)
-
-
-def scheduled_steps(cfg: RunConfig) -> int:
-    """Proposed moves of a run: ``anneal.steps`` exactly when given, else the schedule's default
-    ``steps_at_1000 * (N / 1000)^steps_exponent``. A CCO run (``method=cco``) counts terminals
-    added instead: N.
-    """
-    if cfg.method.name == "cco":
-        return int(cfg.n_terminals)
-    if cfg.anneal.steps is not None:
-        return int(cfg.anneal.steps)
-    return max(1, int(round(cfg.anneal.steps_at_1000 * (cfg.n_terminals / 1000.0) ** cfg.anneal.steps_exponent)))
-
-
-def packing_steps(cfg: RunConfig) -> int:
-    """Proposals of the packing phase (the first of the run's steps): per terminal times N."""
-    return int(round(cfg.anneal.packing_steps_per_terminal * cfg.n_terminals))

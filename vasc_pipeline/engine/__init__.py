@@ -29,14 +29,17 @@ from .problem import (
     tree_statistics,
 )
 from .run import (
+    BlockHook,
     RunResult,
     Trace,
+    TraceRecord,
     accepted_moves,
     anneal_blocks,
     finish,
     run,
     run_block,
     run_phase,
+    trace_record,
 )
 
 __all__ = [
@@ -55,7 +58,10 @@ __all__ = [
     "supply_dtype",
     "CHECKPOINT_FIELDS",
     "RunResult",
+    "BlockHook",
     "Trace",
+    "TraceRecord",
+    "trace_record",
     "run_block",
     "run_phase",
     "anneal_blocks",

@@ -75,7 +75,7 @@ from ..model.costs import full_costs, total_cost
 from ..model.physics import cost_tables
 from ..model.rng import next_below, next_double, seed_state
 from ..model.tree import Tree, sites_in_voxels
-from ..store.run_store import TRACE_FIELDS
+from ..store.trace import TRACE_NAMES
 from .fermat import _norm3, fermat_point
 
 # fermat_point lives in vasc_pipeline.engine.fermat; it stays importable from here, where it is used.
@@ -91,10 +91,9 @@ __all__ = [
     "TRACE_NAMES",
 ]
 
-# Trace fields of a CCO run (the anneal's names; "step" counts terminals in the tree,
-# "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance criterion
-# accepted for that terminal).
-TRACE_NAMES = tuple(f[0] for f in TRACE_FIELDS)
+# A CCO run's trace has the anneal's columns (TRACE_NAMES): "step" counts terminals in the
+# tree, "temperature" is NaN, "acceptance" is the fraction of drawn sites the distance
+# criterion accepted for that terminal.
 
 
 @dataclass

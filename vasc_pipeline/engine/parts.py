@@ -390,12 +390,6 @@ def merge_parts(model: kernel.Model, state: kernel.State, parts: list[Part], res
 
 
 def phase_ends(problem: Problem) -> np.ndarray:
-    """The global step at which each phase of the parts' anneal ends: ``anneal.part_phases``
-    equal shares of the tree anneal (after the packing phase), and the end of the coarse
-    exclusion map's phase, so that no phase straddles a change of model."""
-    a = problem.config.anneal
-    pack, total = int(problem.model.pack_steps), int(problem.total_steps)
-    ends = pack + (total - pack) * np.arange(1, a.part_phases + 1, dtype=np.int64) // a.part_phases
-    if pack < problem.coarse_steps < total:
-        ends = np.union1d(ends, [problem.coarse_steps])
-    return np.unique(ends[ends > pack])
+    """The global step at which each phase of the parts' anneal ends (:meth:`Schedule.phase_ends
+    <vasc_pipeline.config.schedule.Schedule.phase_ends>`)."""
+    return problem.schedule.phase_ends()

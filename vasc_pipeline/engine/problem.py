@@ -17,7 +17,8 @@ import numpy as np
 
 from .. import kernel
 from ..config.checks import share_set_by_model, validate
-from ..config.schema import ConfigError, RunConfig, packing_steps, scheduled_steps, to_run_config
+from ..config.schedule import Schedule
+from ..config.schema import ConfigError, RunConfig, to_run_config
 from ..model.costs import COST_TERMS, ActiveTerms, active_terms, cavity_share, total_cost
 from ..model.physics import Physics, cost_tables, supply_radius
 from ..model.rng import seed_state
@@ -68,10 +69,19 @@ class Problem:
     tissue: Tissue
     terms: ActiveTerms
     model: kernel.Model
-    total_steps: int
+    schedule: Schedule  # the run's phases in steps (the kernel's Model holds a flat copy)
     sites: np.ndarray | None = None
-    coarse_model: kernel.Model | None = None  # ``model`` on the coarse exclusion map (anneal.coarse_exclusion_*) ...
-    coarse_steps: int = 0  # ... for the proposals before this one (0: none)
+    coarse_model: kernel.Model | None = None  # ``model`` on the coarse exclusion map, before schedule.coarse
+
+    @property
+    def total_steps(self) -> int:
+        """Proposed moves of the run."""
+        return self.schedule.total
+
+    @property
+    def coarse_steps(self) -> int:
+        """The proposals before this one run on ``coarse_model`` (0: none)."""
+        return self.schedule.coarse
 
 
 def node_radii(tree: Tree, physics: Physics) -> np.ndarray:
@@ -131,9 +141,8 @@ def build_problem(config: Any) -> Problem:
     terms = active_terms(physics, cfg.terminals.fixed)
     w_o, w_p, w_s = physics.weights
     lo, hi = tissue.bounds
-    total_steps = scheduled_steps(cfg)
+    schedule = Schedule.of(cfg, exclusion=terms.exclusion)
     a = cfg.anneal
-    pack_steps = packing_steps(cfg)
     cell_size = a.neighbour_cell * physics.supply_radius
     cell_shape = np.maximum(np.ceil((hi - lo) / cell_size), 1).astype(np.int64)
     if tissue.ndim == 2:
@@ -153,9 +162,6 @@ def build_problem(config: Any) -> Problem:
     check_voxel_scale(tissue, physics.supply_radius, n)
     rho = physics.supply_radius / tissue.voxel_size
     sphere_voxels = math.pi * rho**2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho**3  # C_s scale of one move
-
-    def tree_steps(phase: float) -> float:  # a share of the tree anneal's steps (after packing)
-        return float(round(phase * (total_steps - pack_steps)))
 
     model = kernel.Model(
         n_inlets=k,
@@ -178,9 +184,9 @@ def build_problem(config: Any) -> Problem:
         planar=tissue.ndim == 2,
         pressure_inlet=p.pressure_inlet,
         pressure_terminal=p.pressure_terminal,
-        total_steps=float(total_steps),
-        pack_steps=float(pack_steps),
-        cold_steps=tree_steps(1.0 - a.cold_share) if a.cold_from is not None else tree_steps(1.0),
+        total_steps=float(schedule.total),
+        pack_steps=float(schedule.pack),
+        cold_steps=float(schedule.cold),
         cold_path=float(a.cold_from) if a.cold_from is not None else 1.0,
         pack_T_start=float(a.packing_T_start) * sphere_voxels,
         pack_T_end=float(a.packing_T_end),
@@ -191,9 +197,9 @@ def build_problem(config: Any) -> Problem:
         cell_shape=cell_shape,
         supply_T_start=float(a.supply_T_start or 1.0) * sphere_voxels,
         supply_T_end=float(a.supply_T_end),
-        supply_steps=tree_steps(a.supply_phase) if a.supply_T_start is not None else 0.0,
+        supply_steps=float(schedule.supply),
         adapt_steps=bool(a.adapt_steps),
-        full_width_steps=tree_steps(a.full_width_phase),
+        full_width_steps=float(schedule.full_width),
         acceptance_target=float(a.acceptance_target),
         adapt_window=int(a.adapt_window),
         step_max=np.array([a.step_terminal, a.step_bifurcation]) * physics.supply_radius,
@@ -214,13 +220,12 @@ def build_problem(config: Any) -> Problem:
             else np.ascontiguousarray(tissue.supply_target, dtype=np.uint8)
         ),
     )
-    coarse_model, coarse_steps = None, 0
-    if a.coarse_exclusion_factor is not None and terms.exclusion:
+    coarse_model = None
+    if schedule.coarse > 0:
         coarse_model = model._replace(
             **kernel.exclusion_fields(tissue.exclusion_grid.coarsened(a.coarse_exclusion_factor))
         )
-        coarse_steps = pack_steps + int(tree_steps(a.coarse_exclusion_phase))
-    return Problem(cfg, physics, tissue, terms, model, total_steps, sites, coarse_model, coarse_steps)
+    return Problem(cfg, physics, tissue, terms, model, schedule, sites, coarse_model)
 
 
 def supply_dtype(n_terminals: int) -> type:

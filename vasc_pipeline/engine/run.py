@@ -24,14 +24,26 @@ from ..kernel import packing
 from ..model.costs import COST_TERMS, full_costs, vascular_cost
 from ..model.rng import next_double
 from ..model.tree import Tree
-from ..store.run_store import TRACE_FIELDS
+from ..store.trace import Trace, TraceRecord
 from .parts import anneal_parts, make_parts, merge_parts, phase_ends
 from .polish import descend_swaps, polish
-from .problem import Problem, build_problem, initial_state, node_radii, running_costs, tree_of, tree_statistics
+from .problem import (
+    Problem,
+    build_problem,
+    initial_state,
+    model_at,
+    node_radii,
+    running_costs,
+    tree_of,
+    tree_statistics,
+)
 
 __all__ = [
     "RunResult",
     "Trace",
+    "TraceRecord",
+    "trace_record",
+    "BlockHook",
     "run_block",
     "run_phase",
     "anneal_blocks",
@@ -51,7 +63,7 @@ class RunResult:
     costs_recomputed: dict[str, float]
     steps: int
     wall_seconds: float
-    trace: dict[str, np.ndarray] = field(repr=False)
+    trace: dict[str, np.ndarray] = field(repr=False)  # records not taken by run's on_block (all, without one)
     counters: np.ndarray = field(repr=False)
     anneal: dict[str, Any] = field(default_factory=dict)  # schedule as run, final step sizes, polish report
     statistics: dict[str, float] = field(default_factory=dict)  # tree_statistics of the final tree
@@ -70,16 +82,16 @@ def run_block(problem: Problem, state: kernel.State, n_steps: int) -> None:
     n = int(n_steps)
     coarse = min(n, problem.coarse_steps - int(state.counters[kernel.COUNTER_STEP]))
     if coarse > 0:
-        _run_model(problem.coarse_model, state, coarse)
+        _run_model(problem.coarse_model, state, coarse, problem.schedule.pack)
         n -= coarse
         if state.counters[kernel.COUNTER_STEP] == problem.coarse_steps:
             kernel.recompute_exclusion(problem.model, state)
     if n > 0:
-        _run_model(problem.model, state, n)
+        _run_model(problem.model, state, n, problem.schedule.pack)
 
 
-def _run_model(model: kernel.Model, state: kernel.State, n: int) -> None:
-    if state.counters[kernel.COUNTER_STEP] < model.pack_steps:
+def _run_model(model: kernel.Model, state: kernel.State, n: int, pack: int) -> None:
+    if state.counters[kernel.COUNTER_STEP] < pack:
         n -= packing.pack_block(model, state, n)
     if n > 0:
         kernel.anneal_block(model, state, n)
@@ -94,7 +106,7 @@ def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable
     running the parts; then the rest on the whole tree (:func:`run_block`)."""
     a = problem.config.anneal
     step = int(state.counters[kernel.COUNTER_STEP])
-    model = problem.coarse_model if step < problem.coarse_steps else problem.model
+    model = model_at(problem, step)
     for leaves in (False, True):  # subtrees (their bifurcations and topology), then terminals by place
         shift = np.array([next_double(state.rng) for _ in range(3)])
         phase_seed = int(next_double(state.rng) * 2.0**53)
@@ -106,27 +118,17 @@ def run_phase(problem: Problem, state: kernel.State, n_steps: int, map: Callable
         run_block(problem, state, rest)
 
 
-class Trace:
-    """Cost trace records, one per block: step, temperature, cost terms, acceptance."""
-
-    names = tuple(f[0] for f in TRACE_FIELDS)
-
-    def __init__(self) -> None:
-        self.rows: list[tuple] = []
-
-    def record(self, problem: Problem, state: kernel.State, proposed: int, accepted: int) -> None:
-        step = int(state.counters[kernel.COUNTER_STEP])
-        costs = running_costs(problem, state)
-        temp = kernel.temperature(problem.model, state, max(step - 1, 0))
-        self.rows.append(
-            (step, temp, *(costs[c] for c in COST_TERMS), costs["total"], accepted / proposed if proposed else 0.0)
-        )
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        data = np.array(self.rows, dtype=np.float64).reshape(-1, len(self.names))
-        out = {name: data[:, i] for i, name in enumerate(self.names)}
-        out["step"] = out["step"].astype(np.int64)
-        return out
+def trace_record(problem: Problem, state: kernel.State, proposed: int, accepted: int) -> TraceRecord:
+    """The trace record of the state after a block of ``proposed`` proposals, ``accepted`` of them taken."""
+    step = int(state.counters[kernel.COUNTER_STEP])
+    costs = running_costs(problem, state)
+    return TraceRecord(
+        step=step,
+        temperature=kernel.temperature(problem.model, state, max(step - 1, 0)),
+        **{term: costs[term] for term in COST_TERMS},
+        total=costs["total"],
+        acceptance=accepted / proposed if proposed else 0.0,
+    )
 
 
 def accepted_moves(state: kernel.State) -> int:
@@ -151,15 +153,15 @@ def anneal_blocks(
     ends = phase_ends(problem) if problem.config.anneal.parts > 1 else None
     while (step := int(state.counters[kernel.COUNTER_STEP])) < total:
         before = accepted_moves(state)
-        if ends is not None and step >= problem.model.pack_steps:
+        if ends is not None and step >= problem.schedule.pack:
             n = int(ends[np.searchsorted(ends, step, side="right")]) - step
             run_phase(problem, state, n, part_map)
         else:
             n = min(block - step % block, total - step)
             if ends is not None:  # the packing phase's last block ends where the phases begin
-                n = min(n, int(problem.model.pack_steps) - step)
+                n = min(n, problem.schedule.pack - step)
             run_block(problem, state, n)
-        trace.record(problem, state, n, accepted_moves(state) - before)
+        trace.append(trace_record(problem, state, n, accepted_moves(state) - before))
         yield step + n
 
 
@@ -197,13 +199,19 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
     return report
 
 
+BlockHook = Callable[[int, kernel.State, Trace], None]
+
+
 def run(
-    config: Any,
+    config: Any = None,
     seed: int | None = None,
     *,
     block_steps: int | None = None,
     progress: Callable[[int, int, dict], None] | None = None,
     part_map: Callable = map,
+    on_block: BlockHook | None = None,
+    problem: Problem | None = None,
+    state: kernel.State | None = None,
 ) -> RunResult:
     """Grow one tree from (config, seed) and return it with running and recomputed costs.
 
@@ -211,17 +219,29 @@ def run(
     sets the trace resolution; it does not change the result. ``progress(step, total,
     costs)`` is called after every block. ``part_map`` runs the parts of an ``anneal.parts`` > 1
     anneal (:func:`anneal_blocks`); it does not change the result.
+
+    ``on_block(step, state, trace)`` is called after every block too, with the step count,
+    the state and the trace (its last record the block's): a caller that checkpoints there
+    takes the trace's records (:meth:`~vasc_pipeline.store.trace.Trace.take`), and the
+    result's ``trace`` then holds only the records after the last one taken. ``problem``
+    is ``build_problem(config)`` when the caller has it already (``config`` is then not
+    needed); ``state`` continues a restored state (:func:`restore_state`) instead of starting
+    from ``initial_state(problem, seed)``. The trace's first record is that of the state
+    before any proposal, so a state past step 0 (resumed) adds none: its store has it.
     """
     start = time.perf_counter()
-    problem = build_problem(config)
+    problem = build_problem(config) if problem is None else problem
     seed = problem.config.seed if seed is None else int(seed)
-    state = initial_state(problem, seed)
+    state = initial_state(problem, seed) if state is None else state
     block = int(block_steps or problem.config.anneal.trace_every)
     trace = Trace()
-    trace.record(problem, state, 0, 0)
+    if int(state.counters[kernel.COUNTER_STEP]) == 0:
+        trace.append(trace_record(problem, state, 0, 0))
     for step in anneal_blocks(problem, state, trace, block, part_map):
         if progress is not None:
             progress(step, problem.total_steps, running_costs(problem, state))
+        if on_block is not None:
+            on_block(step, state, trace)
     report = finish(problem, state)
     tree = tree_of(problem, state)
     return RunResult(

@@ -6,10 +6,11 @@ A plain function, no Dask inside (the orchestrator wraps it), usable on its own:
     (j,) = sweep.expand(config.compose(["tissue=plane2d", "anneal.steps=200000", "output_dir=/tmp/r"]))
     job.run_job(j)          # {'run_id': ..., 'status': 'complete', ...}
 
-The anneal loop is the engine's (blocks of ``anneal.trace_every`` proposals, one trace
-record per block); blocks start at multiples of ``trace_every`` from step 0 whether or not
-the run was resumed, so a resumed run ends with exactly the tree and trace of an
-uninterrupted one. The job writes everything it produces to the store and returns a small
+The anneal is :func:`vasc_pipeline.engine.run` itself (blocks of ``anneal.trace_every``
+proposals, one trace record per block), with the store's hook (:class:`StoreHook`: progress
+and checkpoints) after every block; blocks start at multiples of ``trace_every`` from step 0
+whether or not the run was resumed, so a resumed run ends with exactly the tree and trace
+of an uninterrupted one. The job writes everything it produces to the store and returns a small
 summary: results held in a dead worker's memory would be recomputed when the worker dies.
 """
 
@@ -24,11 +25,11 @@ import numpy as np
 
 from .. import engine, kernel
 from ..engine.parts import phase_ends
-from ..model.costs import full_costs
-from ..store.run_store import STATUS_COMPLETE, CheckpointWarning, RunStore, is_empty_leftover, run_lock
+from ..store.run_store import STATUS_COMPLETE, Checkpoint, CheckpointWarning, RunStore, is_empty_leftover, run_lock
+from ..store.trace import Trace
 from .sweep import Job
 
-__all__ = ["run_job", "ensure_store", "create_store"]
+__all__ = ["run_job", "ensure_store", "create_store", "StoreHook"]
 
 Reporter = Callable[[Mapping[str, Any]], None]
 
@@ -127,12 +128,7 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
         if problem.config.method.name == "cco":
             return _run_cco(job, problem, store, started, cpu_started, report)
 
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", CheckpointWarning)
-            checkpoint = store.load_checkpoint()
-        for w in caught:  # re-emit for the caller's log, and keep the text for the summary
-            seen.append(str(w.message))
-            warnings.warn(w.message, w.category, stacklevel=2)
+        checkpoint = _load_checkpoint(store, seen)
         store.record_resume(checkpoint)
         if checkpoint is None:
             state = engine.initial_state(problem, job.coords["seed"])
@@ -144,69 +140,101 @@ def run_job(job: Job, report: Reporter | None = None, part_map: Callable = map) 
             if not store.has_tissue():
                 store.write_start(problem.tissue, problem.physics.as_attrs())
         store.set_trace_length(trace_length)  # cut records of a crashed session
+        hook = StoreHook(job, problem, store, trace_length, wall_before, started, report)
 
-        trace = engine.Trace()
-        if checkpoint is None:
-            trace.record(problem, state, 0, 0)
-        total = problem.total_steps
-        block = int(problem.config.anneal.trace_every)
-        every = float(problem.config.checkpoint.every_seconds)
         step0 = int(state.counters[kernel.COUNTER_STEP])
-        last_checkpoint = time.perf_counter()
-
-        def wall() -> float:
-            return wall_before + (time.perf_counter() - started)
-
-        parts = int(problem.config.anneal.parts)
-        ends = phase_ends(problem) if parts > 1 else None
-        for step in engine.anneal_blocks(problem, state, trace, block, part_map):
-            if report is not None:
-                msg = {
-                    "run_id": job.run_id,
-                    "cell": job.cell,
-                    "step": step,
-                    "total_steps": total,
-                    "cost": float(trace.rows[-1][-2]),
-                }
-                if ends is not None:  # phases done, phases, parts
-                    msg["phase"] = [int(np.searchsorted(ends, step, side="right")), len(ends), parts]
-                report(msg)
-            if time.perf_counter() - last_checkpoint >= every and step < total:
-                trace_length = store.append_trace(trace.arrays(), trace_length)
-                trace.rows.clear()  # the same Trace: anneal_blocks records into it
-                store.write_checkpoint(
-                    engine.state_arrays(state), step=step, trace_length=trace_length, wall_seconds=wall()
-                )
-                last_checkpoint = time.perf_counter()
-
-        trace_length = store.append_trace(trace.arrays(), trace_length)
-        anneal_report = engine.finish(problem, state)
-        tree = engine.tree_of(problem, state)
+        result = engine.run(
+            seed=job.coords["seed"], problem=problem, state=state, part_map=part_map, on_block=hook.on_block
+        )
         _write_tree(
             store,
             problem,
-            tree,
-            cost=engine.running_costs(problem, state),
-            cost_recomputed=full_costs(tree, problem.tissue, problem.physics, problem.terms),
-            steps_done=int(state.counters[kernel.COUNTER_STEP]),
-            trace_length=trace_length,
-            wall_seconds=wall(),
-            anneal=anneal_report,
+            result.tree,
+            cost=result.costs,
+            cost_recomputed=result.costs_recomputed,
+            steps_done=result.steps,
+            trace_length=store.append_trace(result.trace, hook.trace_length),  # the records after the last checkpoint
+            wall_seconds=hook.wall(),
+            anneal=result.anneal,
+            statistics=result.statistics,
         )
-        session_steps = int(state.counters[kernel.COUNTER_STEP]) - step0
         return _summary(
             job,
             store,
             "complete",
             resumed_from,
-            session_steps,
+            result.steps - step0,
             time.perf_counter() - started,
             seen,
             time.process_time() - cpu_started,
         )
 
 
-def _write_tree(store: RunStore, problem: engine.Problem, tree, **final) -> None:
+def _load_checkpoint(store: RunStore, seen: list[str]) -> Checkpoint | None:
+    """The store's last good checkpoint (None: a fresh start); each fallback's warning is
+    re-emitted for the caller's log, and its text kept in ``seen`` for the summary."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CheckpointWarning)
+        checkpoint = store.load_checkpoint()
+    for w in caught:
+        seen.append(str(w.message))
+        warnings.warn(w.message, w.category, stacklevel=3)
+    return checkpoint
+
+
+class StoreHook:
+    """The job's ``on_block`` for :func:`vasc_pipeline.engine.run`: the progress report after
+    every block and, every ``checkpoint.every_seconds``, a checkpoint with the trace so far.
+
+    ``trace_length`` is the store's trace records (committed with each checkpoint); ``wall``
+    the run's wall time over all its sessions (``wall_before`` from the earlier ones).
+    """
+
+    def __init__(
+        self,
+        job: Job,
+        problem: engine.Problem,
+        store: RunStore,
+        trace_length: int,
+        wall_before: float,
+        started: float,
+        report: Reporter | None,
+    ) -> None:
+        self.job, self.problem, self.store, self.report = job, problem, store, report
+        self.trace_length, self.wall_before, self.started = int(trace_length), float(wall_before), started
+        self.every = float(problem.config.checkpoint.every_seconds)
+        self.parts = int(problem.config.anneal.parts)
+        self.ends = phase_ends(problem) if self.parts > 1 else None
+        self.last_checkpoint = time.perf_counter()
+
+    def wall(self) -> float:
+        return self.wall_before + (time.perf_counter() - self.started)
+
+    def on_block(self, step: int, state: kernel.State, trace: Trace) -> None:
+        if self.report is not None:
+            self.report(self.message(step, trace))
+        if time.perf_counter() - self.last_checkpoint >= self.every and step < self.problem.total_steps:
+            self.trace_length = self.store.append_trace(trace.take(), self.trace_length)
+            self.store.write_checkpoint(
+                engine.state_arrays(state), step=step, trace_length=self.trace_length, wall_seconds=self.wall()
+            )
+            self.last_checkpoint = time.perf_counter()
+
+    def message(self, step: int, trace: Trace) -> dict[str, Any]:
+        """The progress report: ``cost`` is the annealed total after the block (W-scaled)."""
+        msg: dict[str, Any] = {
+            "run_id": self.job.run_id,
+            "cell": self.job.cell,
+            "step": step,
+            "total_steps": self.problem.total_steps,
+            "cost": float(trace.last.total),
+        }
+        if self.ends is not None:  # phases done, phases, parts
+            msg["phase"] = [int(np.searchsorted(self.ends, step, side="right")), len(self.ends), self.parts]
+        return msg
+
+
+def _write_tree(store: RunStore, problem: engine.Problem, tree, statistics: dict | None = None, **final) -> None:
     """The final tree of either method, with what follows from it (radii, kinds, statistics)."""
     store.write_final(
         parent=tree.parent,
@@ -214,7 +242,7 @@ def _write_tree(store: RunStore, problem: engine.Problem, tree, **final) -> None
         radius=engine.node_radii(tree, problem.physics),
         kind=tree.kind,
         physics=problem.physics.as_attrs(),
-        statistics=engine.tree_statistics(problem, tree),
+        statistics=engine.tree_statistics(problem, tree) if statistics is None else statistics,
         **final,
     )
 

@@ -19,6 +19,7 @@ from ..store.run_store import RunStore
 
 if TYPE_CHECKING:
     from .planning import Plan
+    from .sweep_result import SweepResult
 
 __all__ = ["Progress", "print_summary", "runs_phrase", "PROGRESS_TOPIC"]
 
@@ -146,17 +147,17 @@ def _terminal_width() -> int:
         return 120
 
 
-def print_summary(result: dict, p: Plan, stream: TextIO) -> None:
-    n_failed = len(result["failed"])
+def print_summary(result: SweepResult, p: Plan, stream: TextIO) -> None:
+    n_failed = len(result.failed)
     lines = [
-        f"vasc_pipeline: finished in {_duration(result['wall_seconds'])}: {runs_phrase(len(p.jobs))}: "
-        f"{len(result['complete'])} completed now ({len(result['resumed'])} resumed from a checkpoint), "
-        f"{len(result['skipped'])} already complete, {n_failed} failed"
-        + (f", {len(result['damaged'])} left out (damaged store)" if result.get("damaged") else "")
+        f"vasc_pipeline: finished in {_duration(result.wall_seconds)}: {runs_phrase(len(p.jobs))}: "
+        f"{len(result.complete)} completed now ({len(result.resumed)} resumed from a checkpoint), "
+        f"{len(result.skipped)} already complete, {n_failed} failed"
+        + (f", {len(result.damaged)} left out (damaged store)" if result.damaged else "")
         + "."
     ]
-    deterministic = result.get("deterministic", set())
-    for run_id, error in result["failed"].items():
+    deterministic = result.deterministic
+    for run_id, error in result.failed.items():
         lines.append(f"  failed: {run_id}: {error}")
     if deterministic:
         lines.append(
@@ -169,7 +170,7 @@ def print_summary(result: dict, p: Plan, stream: TextIO) -> None:
             f"  Rerun the same command to retry the {'other ' if deterministic else ''}failed runs (finished "
             "runs are skipped; the others resume from their last checkpoint)."
         )
-    for run_id, why in result.get("damaged", {}).items():
+    for run_id, why in result.damaged.items():
         lines.append(f"  left out: {run_id}: {why}")
     lines.append(
         f"Results: {p.output_dir / RUNS_DIR}/<run_id>.zarr (xarray.open_zarr(path, group='trace'); "

@@ -2,7 +2,9 @@
 the figures drawn from them (:mod:`vasc_pipeline.figures`), in that order.
 
 The reduction itself draws nothing, so it runs without matplotlib's import and a script may
-reduce without figures; this is the one place that calls the two together.
+reduce without figures; this is the one place that calls the two together. :func:`reduce_stage`
+is ``+stage=reduce``: the reduction of runs already made, refused when the command line asks
+for values other than theirs.
 """
 
 from __future__ import annotations
@@ -10,11 +12,14 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
-from ..store.layout import FIGURES_DIR
+from .. import config as _config
+from ..config.schema import ConfigError
+from ..store.layout import FIGURES_DIR, RUNS_DIR
+from ..store.run_store import StoreError
 
-__all__ = ["reduce_and_draw"]
+__all__ = ["reduce_and_draw", "reduce_stage"]
 
 
 def reduce_and_draw(
@@ -59,3 +64,72 @@ def _draw(draw, result, stage: str, stream: TextIO) -> list:
     stream.write(f"  {stage}: {len(paths)} PNG in {Path(result.output_dir) / FIGURES_DIR}\n")
     stream.flush()
     return paths
+
+
+def reduce_stage(cfg: Any, stream: TextIO | None = None) -> int:
+    """``+stage=reduce``: reduce the complete runs already in ``cfg.output_dir``; returns the exit status."""
+    from ..reduce import ReductionError
+
+    stream = stream or sys.stderr
+    try:  # the same checks as a run: a typo'd value is reported, not silently ignored
+        _config.validate(_config.to_run_config(cfg))
+    except ConfigError as exc:
+        stream.write(f"vasc_pipeline: error: {exc}\nNothing was reduced; existing results were left as they were.\n")
+        return 2
+    output_dir = Path(cfg.output_dir)
+    if not (output_dir / RUNS_DIR).is_dir():
+        stream.write(
+            f"vasc_pipeline: error: output_dir {str(output_dir)!r} holds no runs/ directory: nothing to "
+            "reduce. Give the output_dir of a sweep (output_dir=...).\n"
+        )
+        return 2
+    ignored = _overrides_unlike_the_runs(cfg, output_dir)
+    if ignored:
+        stream.write(
+            f"vasc_pipeline: error: +stage=reduce reduces the runs of {str(output_dir)!r} as they were made, and "
+            f"they were made with other values: {'; '.join(ignored)}. Drop those overrides (or run a sweep with "
+            "them into a new output_dir=...). Nothing was reduced.\n"
+        )
+        return 2
+    try:
+        reduction = reduce_and_draw(output_dir, stream=stream, extended_zerod=cfg.extend.zerod)
+    except (ReductionError, OSError) as exc:
+        stream.write(f"vasc_pipeline: error: {exc}\n")
+        return 2
+    return 1 if reduction.errors or reduction.damaged else 0
+
+
+def _overrides_unlike_the_runs(cfg: Any, output_dir: Path) -> list[str]:
+    """The command-line ``key=value`` overrides (Hydra's, when it runs) of keys the stored runs
+    hold with another value: ``+stage=reduce physics.gamma=3`` on runs made with 2.1 would
+    otherwise be ignored without a word. Sweep axes, output_dir, stage, sweep, cluster and
+    checkpoint keys, and group choices, are not compared."""
+    from omegaconf import OmegaConf
+
+    from ..store import SWEEP_AXES, RunStore
+
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        overrides = list(HydraConfig.get().overrides.task)
+    except (ImportError, ValueError):  # not under Hydra (a test, a script): nothing typed
+        return []
+    stored = None
+    for path in sorted((output_dir / RUNS_DIR).glob("*.zarr")):
+        try:
+            stored = RunStore.open(path, mode="r").attrs.get("config") or {}
+            break
+        except StoreError:
+            continue
+    out = []
+    for o in overrides:
+        key = o.lstrip("+~").partition("=")[0]
+        if "." not in key or key in SWEEP_AXES or key.split(".")[0] in ("sweep", "cluster", "checkpoint", "hydra"):
+            continue
+        node: Any = stored
+        for part in key.split("."):
+            node = node.get(part, KeyError) if isinstance(node, dict) else KeyError
+        requested = OmegaConf.select(cfg, key, default=KeyError) if OmegaConf.is_config(cfg) else KeyError
+        if node is not KeyError and requested is not KeyError and node != requested:
+            out.append(f"{key}={requested} (the runs: {node})")
+    return out

@@ -48,7 +48,8 @@ import numpy as np
 import psutil
 import xarray as xr
 
-from ..store.run_store import TRACE_FIELDS, RunStore, file_lock
+from ..store.run_store import RunStore, file_lock
+from ..store.trace import TRACE_META, TRACE_NAMES
 from . import morphometry as _m
 from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, anatomy_of_store
 from .reference import ARTERIES, kassab_dataset
@@ -58,14 +59,13 @@ from .similarity import main_trunks, tortuosity, trunk_spread
 __all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
 
 COMPARISON_SCHEME, COMPARISON_LEVEL = "diameter_defined", "element"
-_TRACE_META = {name: (units, long_name) for name, _, units, long_name in TRACE_FIELDS}
 _COST_META = {
-    "total": _TRACE_META["total"],
-    "volume": _TRACE_META["volume"],
-    "power": _TRACE_META["power"],
-    "supply": _TRACE_META["supply"],
-    "exclusion": _TRACE_META["exclusion"],
-    "pressure": _TRACE_META["pressure"],
+    "total": TRACE_META["total"],
+    "volume": TRACE_META["volume"],
+    "power": TRACE_META["power"],
+    "supply": TRACE_META["supply"],
+    "exclusion": TRACE_META["exclusion"],
+    "pressure": TRACE_META["pressure"],
 }
 _CELL_META = {
     "tissue": {"long_name": "tissue"},
@@ -470,7 +470,7 @@ def _traces(runs, dims, cell_coords) -> xr.Dataset:
     traces = {r.run_id: RunStore.open(r.path, mode="r").read_trace() for r in runs}
     n_rec = max((len(t["step"]) for t in traces.values()), default=0)
     shape = grid + [n_rec]
-    names = [f[0] for f in TRACE_FIELDS]
+    names = TRACE_NAMES
     # step as float64 with NaN padding: exact for step counts below 2^53, and plots need no mask
     arrays = {n: np.full(shape, np.nan) for n in names}
     length = np.zeros(shape[:-1], dtype=np.int64)
@@ -482,7 +482,7 @@ def _traces(runs, dims, cell_coords) -> xr.Dataset:
         for n in names:
             arrays[n][at + (slice(0, k),)] = t[n]
     full = dims + ["seed", "record"]
-    data = {n: (full, arrays[n], {"units": _TRACE_META[n][0], "long_name": _TRACE_META[n][1]}) for n in names}
+    data = {n: (full, arrays[n], {"units": TRACE_META[n][0], "long_name": TRACE_META[n][1]}) for n in names}
     data["trace_length"] = (
         dims + ["seed"],
         length,

@@ -1,7 +1,7 @@
 """Stage 5, storage: one Zarr run store per run with atomic checkpoints, and the output dir's layout.
 
 :mod:`~vasc_pipeline.store.run_store` (:class:`RunStore`), :mod:`~vasc_pipeline.store.checkpoints`
-(write, verify, fall back).
+(write, verify, fall back), :mod:`~vasc_pipeline.store.trace` (the cost trace's columns and records).
 """
 
 from .run_store import (
@@ -11,7 +11,6 @@ from .run_store import (
     STATUS_RUNNING,
     SWEEP_AXES,
     TRACE_CHUNK,
-    TRACE_FIELDS,
     Checkpoint,
     CheckpointWarning,
     GroupStore,
@@ -28,6 +27,7 @@ from .run_store import (
     run_path,
     verify_store,
 )
+from .trace import TRACE_FIELDS, TRACE_NAMES, Trace, TraceRecord
 
 __all__ = [
     "RunStore",
@@ -47,6 +47,9 @@ __all__ = [
     "identity_differences",
     "SWEEP_AXES",
     "TRACE_FIELDS",
+    "TRACE_NAMES",
+    "TraceRecord",
+    "Trace",
     "STATUS_RUNNING",
     "STATUS_COMPLETE",
     "RUNS_DIR",

@@ -11,7 +11,7 @@ Layout::
         tree/{parent, position, radius, kind}       final tree (complete runs)
         tissue/{mask, exclusion, distance}          the voxelised tissue, written at start
         tissue/supply_target                        with tissue.demand_path: each voxel's coverage target
-        trace/{step, temperature, volume, ..., total, acceptance}   dim "step"
+        trace/{step, temperature, volume, ..., total, acceptance}   dim "step" (columns: store.trace)
         checkpoints/c<seq>/<state field>            kernel state (engine.state_arrays)
 
 Atomicity (a crash mid-write never leaves a store that reads as valid). ``LocalStore``
@@ -52,9 +52,9 @@ import zarr
 
 from ..config.identity import SWEEP_AXES, config_differences, config_hash, hashed_config, identity_differences
 from ..config.schema import ConfigError
-from ..model.costs import COST_TERM_LABELS, COST_TERMS
 from .checkpoints import CHECKPOINTS, Checkpoint, CheckpointsMixin, CheckpointWarning, crc32
 from .layout import RUNS_DIR, run_path
+from .trace import TRACE_FIELDS, TRACE_NAMES
 
 __all__ = [
     "RunStore",
@@ -82,16 +82,6 @@ __all__ = [
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
 FORMAT = "vasc_pipeline.run/1"
 TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small files
-
-# (name, dtype, units, long_name) of the trace variables; "step" is the dimension.
-TRACE_FIELDS = (
-    ("step", "int64", "1", "proposed moves so far"),
-    ("temperature", "float64", "W", "annealing temperature (cost units)"),
-    *((term, "float64", *COST_TERM_LABELS[term]) for term in COST_TERMS),  # in the engine's Trace order
-    ("total", "float64", "W", "annealed total cost C"),
-    ("acceptance", "float64", "1", "accepted fraction of the block's proposals"),
-)
-_TRACE_NAMES = tuple(f[0] for f in TRACE_FIELDS)
 
 
 class StoreError(OSError):
@@ -403,7 +393,7 @@ class RunStore(GroupStore, CheckpointsMixin):
 
     def set_trace_length(self, length: int) -> None:
         """Cut the trace arrays back to ``length`` records (resume after a crash or a fallback)."""
-        for name in _TRACE_NAMES:
+        for name in TRACE_NAMES:
             arr = self.group[f"trace/{name}"]
             if arr.shape[0] != length:
                 arr.resize((length,))
@@ -411,7 +401,7 @@ class RunStore(GroupStore, CheckpointsMixin):
     def append_trace(self, rows: Mapping[str, np.ndarray], start: int) -> int:
         """Write trace ``rows`` at record ``start``; returns the new (not yet committed) length."""
         n = len(rows["step"])
-        for name in _TRACE_NAMES:
+        for name in TRACE_NAMES:
             arr = self.group[f"trace/{name}"]
             arr.resize((start + n,))  # resize first, write second: a crash leaves fill values
             if n:
@@ -421,12 +411,12 @@ class RunStore(GroupStore, CheckpointsMixin):
     def read_trace(self) -> dict[str, np.ndarray]:
         """Committed trace records."""
         n = self.trace_length
-        return {name: self.group[f"trace/{name}"][:n] for name in _TRACE_NAMES}
+        return {name: self.group[f"trace/{name}"][:n] for name in TRACE_NAMES}
 
     def _final_arrays(self, trace_length: int) -> dict[str, np.ndarray]:
         """The arrays a complete run's checksums cover: the final tree and the committed trace."""
         out = {f"tree/{name}": self.group[f"tree/{name}"][...] for name in ("parent", "position", "radius", "kind")}
-        out.update({f"trace/{name}": self.group[f"trace/{name}"][:trace_length] for name in _TRACE_NAMES})
+        out.update({f"trace/{name}": self.group[f"trace/{name}"][:trace_length] for name in TRACE_NAMES})
         return out
 
     def verify(self) -> None:
@@ -435,7 +425,7 @@ class RunStore(GroupStore, CheckpointsMixin):
         n = int(attrs.get("trace_length", 0))
         try:
             if attrs.get("status") != STATUS_COMPLETE:
-                for name in _TRACE_NAMES:
+                for name in TRACE_NAMES:
                     self.group[f"trace/{name}"][:n]
                 return
             arrays = self._final_arrays(n)
