@@ -1,4 +1,5 @@
-"""Shared test configuration: the ``unit`` / ``integration`` split of the suite.
+"""Shared test configuration for every folder under tests/ (``tests/<stage>/``, ``tests/project/``;
+tests/README.md): the ``unit`` / ``integration`` split of the suite.
 
 Markers (registered in pyproject.toml):
 
@@ -8,7 +9,8 @@ Markers (registered in pyproject.toml):
 - ``unit``: every other test (one function, kernel or store in this process), set here.
 - ``slow``: longer than a minute, left out of the default run.
 
-``python -m pytest -m unit`` runs the unit tests alone; helper functions live in ``helpers.py``.
+``python -m pytest -m unit`` runs the unit tests alone. Helper functions live in ``helpers.py``,
+which the tests of every folder import as ``from helpers import ...`` (``pythonpath`` in pyproject.toml).
 """
 
 from __future__ import annotations

@@ -1,4 +1,9 @@
-"""Shared test helpers: seeded problem builders (configs composed as users compose them)."""
+"""Shared test helpers: seeded problem builders (configs composed as users compose them).
+
+Imported as ``from helpers import ...`` by the tests of every folder under tests/ (``pythonpath``
+in pyproject.toml). Paths in the repository are taken from :data:`REPO`, never from a test
+file's own ``__file__``, whose depth depends on its folder.
+"""
 
 from __future__ import annotations
 
@@ -98,7 +103,7 @@ def assert_moves_of_every_kind_accepted_and_rejected(state, terminals_move=True)
 
 # -- real processes: ``python -m vasc_pipeline`` as a user runs it -----------------------------
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[1]  # this file is tests/helpers.py
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
 TIMEOUT = 240  # seconds any one subprocess may take before the test fails
 # `anneal=fast` as it was before its cold part (2026-11-26): one exponential over all of its

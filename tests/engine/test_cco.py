@@ -9,11 +9,11 @@ import itertools
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import xarray as xr
+from helpers import REPO
 
 from vasc_pipeline import cco, config, engine, job, store, sweep
 from vasc_pipeline.config import ConfigError
@@ -25,8 +25,6 @@ from vasc_pipeline.model.topology_search import best_topology
 from vasc_pipeline.model.tree import Tree, check_tree, children_from_parent, count_terminals, random_terminal_sites
 from vasc_pipeline.pipeline import orchestrate
 from vasc_pipeline.pipeline.reduction import reduce_and_draw
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def problem_of(*overrides: str):

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO
 
 from vasc_pipeline import cco, config, engine, job, store, sweep
 from vasc_pipeline.engine import extend as ex
@@ -29,7 +30,6 @@ from vasc_pipeline.pipeline import orchestrate
 from vasc_pipeline.pipeline.extend import extend_run
 from vasc_pipeline.store.extended import ExtendedStore
 
-REPO = Path(__file__).resolve().parents[1]
 HEART = ["tissue=heart", "n_terminals=24", "method=cco"]
 SPHERE = ["tissue=sphere", "n_terminals=16", "anneal.steps=2000", "anneal.trace_every=500"]
 

@@ -10,10 +10,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import REPO
 
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
-BENCHMARKS = sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("*.py"))
+BENCHMARKS = sorted((REPO / "benchmarks").glob("*.py"))
 
 
 def run_benchmark(name: str, *args: str, cwd) -> subprocess.CompletedProcess:

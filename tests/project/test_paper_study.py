@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 import xarray as xr
 import zarr
+from helpers import REPO
 
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
-REPO = Path(__file__).resolve().parents[1]
 PAPER_STUDY = REPO / "studies" / "paper"
 TINY = [
     "sweep.seeds=[0]",
@@ -64,7 +64,7 @@ def test_size_scan_runs_the_sweep_then_collects_its_small_outputs(tmp_path):
 @pytest.mark.parametrize(
     "script, expected",
     [
-        pytest.param(  # two sweeps: slow; its commands are checked in dry mode by tests/test_studies.py
+        pytest.param(  # two sweeps: slow; its commands are checked in dry mode by tests/project/test_studies.py
             "convergence.sh",
             {
                 "convergence_paper": ["plane2d-N64-mb641.3-S1000-s0", "plane2d-N64-mb641.3-S3000-s0"],

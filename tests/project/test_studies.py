@@ -19,10 +19,10 @@ from importlib.util import find_spec
 from pathlib import Path
 
 import pytest
+from helpers import REPO
 
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
-REPO = Path(__file__).resolve().parents[1]
 STUDIES = REPO / "studies"
 SCRIPTS = sorted(p for p in STUDIES.rglob("*") if p.suffix in (".py", ".sh", ".sbatch") and not p.name.startswith("_"))
 

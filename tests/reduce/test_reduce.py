@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
-from helpers import png_is_a_real_figure
+from helpers import REPO, png_is_a_real_figure
 
 from vasc_pipeline import config, job, morphometry, store, sweep
 from vasc_pipeline import reduce as reduce_mod
@@ -33,7 +33,6 @@ from vasc_pipeline.reduce.summary import write_summary
 
 pytestmark = pytest.mark.integration  # the pipeline end to end (tests/conftest.py)
 
-REPO = Path(__file__).resolve().parents[1]
 GRID = [
     "+sweep=smoke",
     "sweep.n_terminals=[16,24]",
