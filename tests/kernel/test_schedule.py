@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from helpers import (
+    FAST_2026_12,
     FAST_ONE_EXPONENTIAL,
     TRUE_EXCLUSION_MAP,
     assert_block_splits_bit_identical,
@@ -180,7 +181,8 @@ def test_full_width_terminal_moves_stop_after_their_phase_and_leave_the_stream_a
     whole_run = make_problem(*base, "anneal.full_width_phase=1.0")
     cut = make_problem(*base, "anneal.full_width_phase=0.5")
     assert cut.model.full_width_steps == 10000 and whole_run.model.full_width_steps == 20000
-    assert make_problem(*base).model.full_width_steps == 8000  # fast's own: 0.4 of its moves, a quarter of the path
+    fast = make_problem(*base)  # fast's own phase, read from the preset (it moves when it is retuned)
+    assert fast.model.full_width_steps == round(fast.config.anneal.full_width_phase * 20000)
     assert make_problem(*base[:2], "anneal=fast_v1", *base[3:]).model.full_width_steps == 20000
     states = {}
     for name, problem in (("whole_run", whole_run), ("cut", cut)):
@@ -246,8 +248,9 @@ def test_block_splits_across_the_start_of_the_cold_part_are_bit_identical():
 def test_fast_runs_its_hot_half_move_for_move_as_the_one_exponential_over_the_old_budget():
     """``fast``'s cold part (the second half of the path in a fifth of 0.625 of the old budget)
     leaves the hot half as it was: the one exponential over 1.6 times the moves, with the old
-    supply and full-width phases, reaches the knee in the same state, to the bit."""
-    base = ["tissue=plane2d", "n_terminals=30", "anneal=fast"]
+    supply and full-width phases, reaches the knee in the same state, to the bit. On ``fast`` as
+    of 2026-12 (``FAST_2026_12``), whose cold share and phases these step counts are."""
+    base = ["tissue=plane2d", "n_terminals=30", *FAST_2026_12]
     two_part = make_problem(*base, "anneal.steps=50000")
     old = make_problem(*base, "anneal.steps=80000", *FAST_ONE_EXPONENTIAL)
     assert two_part.model.cold_steps == 40_000 and old.model.cold_steps == 80_000
@@ -372,8 +375,9 @@ def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
 
 
 def test_the_schedule_is_computed_once_and_the_kernel_model_copies_it():
+    # FAST_2026_12: every phase on, at values the phase ends below are worked out from
     problem = make_problem(
-        "tissue=sphere", "n_terminals=40", "anneal=fast", "anneal.steps=60000", "anneal.packing_steps_per_terminal=250"
+        "tissue=sphere", "n_terminals=40", *FAST_2026_12, "anneal.steps=60000", "anneal.packing_steps_per_terminal=250"
     )
     s, m, a = problem.schedule, problem.model, problem.config.anneal
     assert (s.total, s.pack, s.tree) == (60_000, 10_000, 50_000) == (problem.total_steps, m.pack_steps, 50_000)

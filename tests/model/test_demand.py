@@ -172,8 +172,15 @@ def test_without_a_map_the_run_is_bit_for_bit_the_one_before(tmp_path):
 def test_terminal_density_follows_the_demand(sphere_map):
     """Two halves of the ball, x > 0 of twice the demand: after a packing phase (supply alone) of
     3000 moves per terminal at N = 200, twice the terminals per volume there (2.07 measured, seed 1
-    1.90; the cost's first form gave 1.33: docs/findings/demand.md), and no excess without the map."""
-    base = ("tissue=sphere", "n_terminals=200", "anneal.packing_steps_per_terminal=3000", "anneal.steps=602000")
+    1.90; the cost's first form gave 1.33: docs/findings/demand.md), and no excess without the map.
+    Measured on ``fast`` as of 2026-12 (``FAST_2026_12``), which a retune of ``fast`` leaves alone."""
+    base = (
+        "tissue=sphere",
+        "n_terminals=200",
+        *FAST_2026_12,
+        "anneal.packing_steps_per_terminal=3000",
+        "anneal.steps=602000",
+    )
     target = make_problem(*base, f"tissue.demand_path={sphere_map}").tissue.supply_target
 
     def ratio(*extra):

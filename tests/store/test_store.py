@@ -303,7 +303,7 @@ def test_keys_added_later_at_their_neutral_value_keep_old_stores_valid(tmp_path)
     """A store written before a key existed resumes under a config holding the key's neutral value."""
     from vasc_pipeline.config import KEYS_ADDED_LATER
 
-    j = tiny_job(tmp_path, "anneal=fast_v1")  # fast_v1 holds steps_exponent at its neutral 2 (fast: 1.7)
+    j = tiny_job(tmp_path, "anneal=fast_v1")  # fast_v1 holds steps_exponent at its neutral 2 (fast: another)
     old = json.loads(json.dumps(j.config))
     del old["anneal"]["packing_steps_per_terminal"], old["tissue"]["exclusion_path"]  # as stored by older code
     assert old["anneal"].get("steps_exponent") == KEYS_ADDED_LATER["anneal.steps_exponent"]
