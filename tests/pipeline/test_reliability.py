@@ -1,4 +1,4 @@
-"""Issue 16, one test per case: never mix configurations, never hang, name the broken store.
+"""Reliability, first pass, one test per case: never mix configurations, never hang, name the broken store.
 
 Runs are tiny (sphere, 16 terminals, a few thousand proposals); where the failure needs a real
 process (Hydra, exit status, a cluster that never starts) ``python -m vasc_pipeline`` runs as a

@@ -307,7 +307,7 @@ def worker_lifetime(walltime: str) -> tuple[str, str] | None:
     once. A retired worker's run is rescheduled without counting as a failure (against
     ``cluster.retries``) and resumes from its last checkpoint on a worker of a new job, which
     adaptive scaling submits to keep ``n_workers`` workers (measured with a LocalCluster:
-    ``tests/test_reliability.py``).
+    ``tests/pipeline/test_reliability.py``).
     """
     total = walltime_seconds(walltime)
     if math.isinf(total):
