@@ -4,6 +4,9 @@ and every range it holds is what validate refuses outside."""
 from __future__ import annotations
 
 import inspect
+import os
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -80,6 +83,19 @@ def test_help_lists_every_key_with_its_accepted_values():
     for key in KEYS:
         assert key.name in text, key.name
     assert "anneal.p_swap: [0, 1]" in text and "physics.gamma: [1, 4]" in text
+
+
+@pytest.mark.integration
+def test_the_command_help_lists_the_keys(tmp_path):
+    repo = str(PAGE.parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([repo, os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run(
+        [sys.executable, "-m", "vasc_pipeline", "--help"], cwd=tmp_path, env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert "== Every key [unit]: accepted values ==" in done.stdout
+    assert "    anneal.p_swap: [0, 1]" in done.stdout and "checkpoint.every_seconds [s]: (0, 604800]" in done.stdout
+    assert "== The config" in done.stdout and "tissue: box, heart, mask, plane2d, sphere" in done.stdout
 
 
 def _base(key):
