@@ -2,10 +2,12 @@
 
 :mod:`~vasc_pipeline.config.schema`: the run's dataclasses (defaults, types);
 :mod:`~vasc_pipeline.config.checks`: :func:`validate`, every range checked before a job starts;
+:mod:`~vasc_pipeline.config.keys`: the key table (unit, accepted range, meaning of every key), which drives
+:func:`validate`, ``--help`` and the page's key tables (:mod:`~vasc_pipeline.config.keypage`);
 :mod:`~vasc_pipeline.config.compose`: :func:`compose` from ``conf/`` as the command line does;
 :mod:`~vasc_pipeline.config.pipeline`: the sweep and cluster groups;
 :mod:`~vasc_pipeline.config.frozen`: a validated config is frozen (checked once, then only read);
-:mod:`~vasc_pipeline.config.rules`: one rule per key a sweep can scan;
+:mod:`~vasc_pipeline.config.rules`: one rule per key a sweep can scan (the key table's for those keys);
 :mod:`~vasc_pipeline.config.identity`: which part of a config determines a result;
 :mod:`~vasc_pipeline.config.schedule`: a run's phases in steps (:class:`Schedule`).
 """

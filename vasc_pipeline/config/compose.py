@@ -21,10 +21,21 @@ __all__ = [
 
 
 def register_schema() -> None:
-    """Register :class:`RunConfig` as Hydra's ``base_config`` (types and keys are checked on merge)."""
+    """Register :class:`RunConfig` as Hydra's ``base_config`` (types and keys are checked on merge),
+    and the resolver ``${vasc_pipeline_keys:}`` that writes the key table's list into ``--help``
+    (conf/config.yaml's ``hydra.help.template``)."""
     from hydra.core.config_store import ConfigStore
+    from omegaconf import OmegaConf
 
     ConfigStore.instance().store(name="base_config", node=RunConfig)
+    if not OmegaConf.has_resolver("vasc_pipeline_keys"):
+        OmegaConf.register_new_resolver("vasc_pipeline_keys", _key_list)
+
+
+def _key_list() -> str:
+    from .keypage import help_text
+
+    return help_text()
 
 
 SINGLE_SWEEP = "single"  # conf/sweep/single.yaml: the base config's one job, axes from the command line

@@ -9,10 +9,10 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from .errors import ConfigError
+from .keyspec import Rule, page_bound
 
 __all__ = ["MAX_STEPS", "MAX_TERMINALS", "SEED_ACCEPTED", "seed_ok", "Rule", "SWEPT_KEYS", "sweep_axis"]
 
@@ -28,38 +28,27 @@ def seed_ok(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**63
 
 
-@dataclass(frozen=True)
-class Rule:
-    """The values a key accepts: numbers of ``kind`` (an int may be written 1e5) passing ``ok``."""
-
-    kind: type
-    ok: Callable[[Any], bool]
-    accepted: str
-
-    def check(self, name: str, value: Any) -> Any:
-        """``value`` as ``kind``; a :class:`ConfigError` naming ``name`` when it is not accepted."""
-        if self.kind is int:  # an int, or a float that is one (1e5); never a bool
-            number = (isinstance(value, int) and not isinstance(value, bool)) or (
-                isinstance(value, float) and value.is_integer()
-            )
-        else:
-            number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        try:
-            ok = number and self.ok(self.kind(value))
-        except OverflowError:  # an integer beyond the float range
-            ok = False
-        if not ok:
-            raise ConfigError(f"{name} must be {self.accepted}, got {value!r}")
-        return self.kind(value)
-
-
 # The keys a sweep can scan: one rule each, for the key (n_terminals, physics.m_b, seed,
 # anneal.steps) and for its axis (sweep.n_terminals, sweep.m_b, sweep.seeds, sweep.steps).
 SWEPT_KEYS = {
-    "n_terminals": Rule(int, lambda v: 2 <= v <= MAX_TERMINALS, f"an integer in [2, {MAX_TERMINALS:.0e}]"),
-    "m_b": Rule(float, lambda v: v > 0 and math.isfinite(v), "a finite number > 0"),
-    "seeds": Rule(int, seed_ok, SEED_ACCEPTED),
-    "steps": Rule(int, lambda v: 1 <= v <= MAX_STEPS, f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)"),
+    "n_terminals": Rule(
+        int,
+        lambda v: 2 <= v <= MAX_TERMINALS,
+        f"an integer in [2, {MAX_TERMINALS:.0e}]",
+        doc=f"integer in [2, {page_bound(MAX_TERMINALS)}]",
+        outside=(1, MAX_TERMINALS + 1, 64.5),
+    ),
+    "m_b": Rule(
+        float, lambda v: v > 0 and math.isfinite(v), "a finite number > 0", doc="> 0", outside=(0.0, -1.0, True)
+    ),
+    "seeds": Rule(int, seed_ok, SEED_ACCEPTED, doc="integer in [0, 2^63)", outside=(-1, 2**63, 0.5)),
+    "steps": Rule(
+        int,
+        lambda v: 1 <= v <= MAX_STEPS,
+        f"an integer in [1, {MAX_STEPS:.0e}] (proposed moves per run)",
+        doc=f"integer in [1, {page_bound(MAX_STEPS)}]",
+        outside=(0, MAX_STEPS + 1),
+    ),
 }
 
 
