@@ -15,7 +15,25 @@ from typing import Any, Callable, Optional, Union
 
 from .errors import ConfigError
 
-__all__ = ["EVERY", "Key", "OneOf", "Range", "Rule", "format_value", "page_bound"]
+__all__ = [
+    "BOOLEAN",
+    "EVERY",
+    "Key",
+    "NON_NEGATIVE",
+    "OneOf",
+    "POSITIVE",
+    "PROBABILITY",
+    "Range",
+    "Rule",
+    "SHARE",
+    "format_value",
+    "mesh_units",
+    "packing_on",
+    "page_bound",
+    "plural",
+    "supply_schedule_on",
+    "tissue_names",
+]
 
 EVERY = "every"  # Key.tissues: a key every tissue reads
 
@@ -240,3 +258,36 @@ class Key:
 
 
 SECTIONS = ("tissue", "physics", "anneal", "terminals", "method", "extend", "checkpoint", "sweep", "cluster")
+
+
+# Shared by the key table's sections (config/keys*.py).
+POSITIVE = Range(0, lo_open=True)
+NON_NEGATIVE = Range(0)
+SHARE = Range(0, 1, lo_open=True, hi_open=True)  # a share strictly between none and all
+PROBABILITY = Range(0, 1)
+BOOLEAN = OneOf((True, False))
+
+
+def tissue_names() -> tuple:
+    from ..model.tissue import TISSUES  # the model imports the config: looked up when checked
+
+    return tuple(sorted(TISSUES))
+
+
+def mesh_units() -> tuple:
+    from ..model.tissue.surfaces import MESH_UNITS
+
+    return tuple(MESH_UNITS)
+
+
+def packing_on(cfg) -> bool:
+    return cfg.anneal.packing_steps_per_terminal > 0
+
+
+def supply_schedule_on(cfg) -> bool:
+    return cfg.anneal.supply_T_start is not None
+
+
+def plural(doc: str) -> str:
+    """``integer in [2, 1e8]`` as ``integers in [2, 1e8]``, ``> 0`` as ``numbers > 0``."""
+    return doc.replace("integer", "integers", 1) if doc.startswith("integer") else f"numbers {doc}"
