@@ -13,6 +13,8 @@ The kernel sees only two named tuples of arrays and scalars (built by
 - :mod:`~vasc_pipeline.kernel.loop`: initialise, :func:`anneal_block`, uphill sampling
 - :mod:`~vasc_pipeline.kernel.packing`: the packing phase (supply term alone)
 - :mod:`~vasc_pipeline.kernel.margins`: voxels near another part's region (a tree in parts)
+- :mod:`~vasc_pipeline.kernel.growth`: the CCO growth (``method=cco``), one terminal at a time
+- :mod:`~vasc_pipeline.kernel.fermat`: the weighted Fermat-Weber point, a CCO connection's optimum
 
 :func:`anneal_block` runs a block of proposed moves from ``state`` and returns; the
 temperature and every random draw depend only on the step number and the saved state, so
@@ -37,6 +39,15 @@ from .exclusion import (
     recompute_exclusion,
     segment_exclusion,
     segment_exclusion_capped,
+)
+from .fermat import (
+    fermat_point,
+)
+from .growth import (
+    MAX_FORBIDDEN_REFUSALS,
+    connection_cost,
+    crosses,
+    grow_terminals,
 )
 from .loop import (
     anneal_block,
@@ -156,4 +167,9 @@ __all__ = [
     "sample_uphill",
     "scaled_total_without_supply",
     "translate_node",
+    "fermat_point",
+    "MAX_FORBIDDEN_REFUSALS",
+    "connection_cost",
+    "crosses",
+    "grow_terminals",
 ]
