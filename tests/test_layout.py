@@ -11,7 +11,7 @@ import pytest
 import vasc_pipeline
 
 PACKAGE = Path(vasc_pipeline.__file__).parent
-MAX_LINES = 700
+MAX_LINES = 500
 MAX_TOP_LEVEL = 12
 
 
@@ -45,7 +45,7 @@ def imported_modules(name: str, path: Path, known: set[str]) -> set[str]:
     return {m for m in found if m in known and m != name and not name.startswith(m + ".")}
 
 
-def test_no_module_is_longer_than_700_lines():
+def test_no_module_is_longer_than_500_lines():
     long = {n: len(p.read_text().splitlines()) for n, p in modules().items()}
     assert {n: k for n, k in long.items() if k > MAX_LINES} == {}
 

@@ -9,7 +9,8 @@ The kernel sees only two named tuples of arrays and scalars (built by
 - :mod:`~vasc_pipeline.kernel.supply`: the supply count map, spheres and shells
 - :mod:`~vasc_pipeline.kernel.pressure`: the pressure term
 - :mod:`~vasc_pipeline.kernel.cells`: neighbour cells for local swap partners
-- :mod:`~vasc_pipeline.kernel.moves`: translate and swap, their ΔC and commit
+- :mod:`~vasc_pipeline.kernel.moves`: translate, its ΔC and commit, the helpers both moves share
+- :mod:`~vasc_pipeline.kernel.swaps`: swap two subtrees, its ΔC
 - :mod:`~vasc_pipeline.kernel.loop`: initialise, :func:`anneal_block`, uphill sampling
 - :mod:`~vasc_pipeline.kernel.packing`: the packing phase (supply term alone)
 - :mod:`~vasc_pipeline.kernel.margins`: voxels near another part's region (a tree in parts)
@@ -59,8 +60,6 @@ from .loop import (
 )
 from .moves import (
     legal_position,
-    swap_nodes,
-    swap_random,
 )
 from .pressure import (
     pressure_cost,
@@ -107,6 +106,10 @@ from .supply import (
     supply_move,
     supply_move_delta,
     supply_sphere,
+)
+from .swaps import (
+    swap_nodes,
+    swap_random,
 )
 
 __all__ = [
