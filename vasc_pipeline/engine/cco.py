@@ -238,25 +238,57 @@ def grow_arrays(
     n, k = int(n_terminals), len(inlets)
     w_vol = np.ascontiguousarray(tables.volume)
     w_pow = np.ascontiguousarray(tables.power)
+    tree = _empty_tree(n, inlets)
+    avoid = forbidden is not None and bool(np.any(forbidden))
+    if avoid:
+        forbidden = np.ascontiguousarray(forbidden, dtype=np.uint8)
+    else:  # numba's argument types stay those of the unconstrained growth
+        forbidden = np.zeros((1, 1, 1), dtype=np.uint8)
+    first = _first_sites(inlets, domain, rng, sites, forbidden if avoid else None)
+    sums = _join_first_terminals(tree, inlets, first, w_vol, w_pow, n)
+    drawn, factor = _grow_the_rest(tree, sums, rng, w_vol, w_pow, domain, method, sites, k, forbidden, avoid)
+    parent, children, position, n_down, _ = tree
+    costs, compensation, trace = sums
+    return Grown(parent, children, position, n_down, trace, costs + compensation, int(drawn) + k, float(factor))
+
+
+def _empty_tree(n: int, inlets: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(parent, children, position, n_down, seg_length) of 2N nodes, the inlets placed, nothing joined."""
     m = 2 * n
     parent = np.full(m, -1, dtype=np.int64)
     children = np.full((m, 2), -1, dtype=np.int64)
     position = np.zeros((m, 3))
     n_down = np.zeros(m, dtype=np.int64)
     seg_length = np.zeros(m)
-    position[:k] = inlets
-    avoid = forbidden is not None and bool(np.any(forbidden))
-    if avoid:
-        forbidden = np.ascontiguousarray(forbidden, dtype=np.uint8)
-        grid_origin = np.ascontiguousarray(domain.origin, dtype=np.float64)
-    else:  # numba's argument types stay those of the unconstrained growth
-        forbidden = np.zeros((1, 1, 1), dtype=np.uint8)
-    first = domain.draw(k, rng) if sites is None else sites[:k]
-    for _ in range(MAX_FORBIDDEN_REFUSALS if avoid and sites is None else 0):
+    position[: len(inlets)] = inlets
+    return parent, children, position, n_down, seg_length
+
+
+def _first_sites(inlets, domain: SiteDomain, rng, sites, forbidden) -> np.ndarray:
+    """The first K sites (one per inlet): given, or drawn, and with ``forbidden`` drawn again until
+    no straight join to an inlet crosses it (at most MAX_FORBIDDEN_REFUSALS times)."""
+    k = len(inlets)
+    if sites is not None:
+        return sites[:k]
+    first = domain.draw(k, rng)
+    if forbidden is None:
+        return first
+    grid_origin = np.ascontiguousarray(domain.origin, dtype=np.float64)
+    for _ in range(MAX_FORBIDDEN_REFUSALS):
         if not any(crosses(forbidden, grid_origin, domain.voxel_size, inlets[j], first[j]) for j in range(k)):
             break
         first = domain.draw(k, rng)
-    # The first K terminals go straight to the inlets, by the cheapest assignment.
+    return first
+
+
+def _join_first_terminals(tree, inlets, first, w_vol, w_pow, n: int) -> tuple[np.ndarray, ...]:
+    """Join the first K terminals straight to the inlets, by the cheapest assignment (in place).
+
+    Returns (costs, compensation, trace): the running sums of C_v and C_w (compensated) and
+    the trace (N, 3) with its first K rows written.
+    """
+    parent, children, position, n_down, seg_length = tree
+    k = len(inlets)
     best = min(
         itertools.permutations(range(k)),
         key=lambda perm: sum(np.linalg.norm(first[perm[j]] - inlets[j]) for j in range(k)),
@@ -273,8 +305,15 @@ def grow_arrays(
         _add(costs, compensation, 0, float(w_vol[1]) * seg_length[t])
         _add(costs, compensation, 1, float(w_pow[1]) * seg_length[t])
         trace[j] = (costs[0] + compensation[0], costs[1] + compensation[1], 1.0)
+    return costs, compensation, trace
+
+
+def _grow_the_rest(tree, sums, rng, w_vol, w_pow, domain: SiteDomain, method, sites, k, forbidden, avoid):
+    """Terminals K .. N - 1 by the kernel (in place); returns (sites drawn, final distance factor)."""
+    parent, children, position, n_down, seg_length = tree
+    costs, compensation, trace = sums
     # one argument per flat array, as grow_terminals' signature lists them (numba takes no struct)
-    drawn, factor = grow_terminals(
+    return grow_terminals(
         parent,
         children,
         position,
@@ -303,7 +342,6 @@ def grow_arrays(
         forbidden,
         avoid,
     )
-    return Grown(parent, children, position, n_down, trace, costs + compensation, int(drawn) + k, float(factor))
 
 
 def grow_tree(problem, rng: np.ndarray) -> tuple[Tree, np.ndarray, int, float]:

@@ -302,68 +302,12 @@ def optimal_bifurcations(
     m = parent.size
     fixed = tree.kind != KIND_BIFURCATION
     free = ~fixed
-    children = tree.children
-    levels = node_levels(children, np.flatnonzero(parent < 0))
-    depth = node_depth(parent)
-    # Work in the affine hull of the fixed nodes: the optimum lies in their convex hull,
-    # and dropping the flat directions (a 2-D tissue's z) keeps the Newton systems regular.
-    p_fixed = tree.position[fixed]
-    centre = p_fixed.mean(axis=0)
-    _, sv, vt = np.linalg.svd(p_fixed - centre, full_matrices=False)
-    scale = float(np.max(np.linalg.norm(p_fixed - centre, axis=1))) or 1.0
-    basis = vt[sv > 1e-12 * max(float(sv[0]), 1e-300)]
-    dim = basis.shape[0]
+    centre, basis, scale = _affine_frame(tree.position[fixed])
     x = (tree.position - centre) @ basis.T
     iterations = 0
     converged = True
-    collapsed = np.zeros(m, dtype=bool)
-    reopened = np.zeros(m, dtype=bool)
-    if dim > 0 and np.any(free):
-        x, iterations = _weiszfeld(x, parent, w, free, depth, scale, 30)
-        seg = parent >= 0
-        length = segment_lengths(parent, x)
-        collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
-        converged = False
-        for _ in range(max_rounds):
-            con = Contraction(parent, levels, depth, fixed, collapsed)
-            spread(x, con)
-            x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton, reopened)
-            spread(x, con)  # Newton moves only the clusters' top nodes
-            iterations += its
-            if short is not None:
-                candidate = collapsed.copy()
-                candidate[short] = True
-                collapsed = _admissible(candidate, parent, levels, depth, fixed)
-                continue
-            idx, force, _ = _side_forces(x, parent, w, levels, con)
-            if idx.size == 0:
-                converged = its < max_newton
-                break
-            excess = np.linalg.norm(force, axis=1) - w[idx]
-            bad = excess > 1e-9 * w[idx]
-            if not np.any(bad):
-                converged = its < max_newton
-                break
-            # Reopen the worst violated segment of each cluster; push its movable side off
-            # along the pull so Newton starts on the side where the segment has length.
-            # A push of fixed length can overshoot a node closer than it (terminals a hair
-            # apart), or leave the reopened segment the shortest (collinear nodes, where
-            # Newton has no curvature to go on): either way the next round contracts a
-            # segment the check then reopens, round after round. Hence the line search.
-            cand = idx[bad]
-            order = np.argsort(-excess[bad])
-            cand, dirs = cand[order], force[bad][order]
-            _, first = np.unique(con.top[cand], return_index=True)
-            cand, dirs = cand[first], dirs[first]
-            collapsed[cand] = False
-            reopened[cand] = True
-            split = Contraction(parent, levels, depth, fixed, collapsed)
-            cost = objective(x, split, w)
-            for i, f in zip(cand, dirs):
-                # The side without a fixed node is the one the pull acts on.
-                side = split.top == (i if split.n_fixed[i] == 0 else split.top[parent[i]])
-                unit = f / np.linalg.norm(f)
-                x, cost = _push_off(x, side, unit, split, w, cost, 1e-7 * scale, scale)
+    if basis.shape[0] > 0 and np.any(free):
+        x, iterations, converged = _solve(x, tree, w, scale, collapse_tol, max_newton, max_rounds)
     position = tree.position.copy()
     position[free] = centre + x[free] @ basis
     if bounds is not None:
@@ -373,6 +317,82 @@ def optimal_bifurcations(
     final = np.zeros(m, dtype=bool)
     final[seg] = segment_lengths(parent, position)[seg] <= collapse_tol * scale
     return BifurcationOptimum(position, vascular_cost(position, parent, w), final, converged, iterations)
+
+
+def _affine_frame(p_fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(centre, basis (dim, 3), scale) of the affine hull of the fixed nodes.
+
+    The solver works in it: the optimum lies in the fixed nodes' convex hull, and dropping the
+    flat directions (a 2-D tissue's z) keeps the Newton systems regular.
+    """
+    centre = p_fixed.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p_fixed - centre, full_matrices=False)
+    scale = float(np.max(np.linalg.norm(p_fixed - centre, axis=1))) or 1.0
+    basis = vt[sv > 1e-12 * max(float(sv[0]), 1e-300)]
+    return centre, basis, scale
+
+
+def _solve(x, tree: Tree, w, scale, collapse_tol, max_newton, max_rounds) -> tuple[np.ndarray, int, bool]:
+    """The three stages (module docstring) from positions ``x`` in the affine frame:
+    Weiszfeld, then rounds of Newton on the contracted problem and the optimality check.
+    Returns (x, iterations, converged)."""
+    parent = tree.parent
+    fixed = tree.kind != KIND_BIFURCATION
+    levels = node_levels(tree.children, np.flatnonzero(parent < 0))
+    depth = node_depth(parent)
+    dim = x.shape[1]
+    reopened = np.zeros(parent.size, dtype=bool)
+    x, iterations = _weiszfeld(x, parent, w, ~fixed, depth, scale, 30)
+    seg = parent >= 0
+    length = segment_lengths(parent, x)
+    collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
+    for _ in range(max_rounds):
+        con = Contraction(parent, levels, depth, fixed, collapsed)
+        spread(x, con)
+        x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton, reopened)
+        spread(x, con)  # Newton moves only the clusters' top nodes
+        iterations += its
+        if short is not None:
+            candidate = collapsed.copy()
+            candidate[short] = True
+            collapsed = _admissible(candidate, parent, levels, depth, fixed)
+            continue
+        idx, force, _ = _side_forces(x, parent, w, levels, con)
+        if idx.size == 0:
+            return x, iterations, its < max_newton
+        excess = np.linalg.norm(force, axis=1) - w[idx]
+        bad = excess > 1e-9 * w[idx]
+        if not np.any(bad):
+            return x, iterations, its < max_newton
+        topology = (parent, levels, depth, fixed)
+        x = _reopen(x, idx[bad], force[bad], excess[bad], con, collapsed, reopened, topology, w, scale)
+    return x, iterations, False
+
+
+def _reopen(x, idx, force, excess, con, collapsed, reopened, topology, w, scale) -> np.ndarray:
+    """Reopen the worst violated segment of each cluster (``collapsed`` and ``reopened`` in place);
+    push its movable side off along the pull so Newton starts on the side where the segment has length.
+
+    A push of fixed length can overshoot a node closer than it (terminals a hair apart), or leave
+    the reopened segment the shortest (collinear nodes, where Newton has no curvature to go on):
+    either way the next round contracts a segment the check then reopens, round after round.
+    Hence the line search (:func:`_push_off`).
+    """
+    parent, levels, depth, fixed = topology
+    order = np.argsort(-excess)
+    cand, dirs = idx[order], force[order]
+    _, first = np.unique(con.top[cand], return_index=True)
+    cand, dirs = cand[first], dirs[first]
+    collapsed[cand] = False
+    reopened[cand] = True
+    split = Contraction(parent, levels, depth, fixed, collapsed)
+    cost = objective(x, split, w)
+    for i, f in zip(cand, dirs):
+        # The side without a fixed node is the one the pull acts on.
+        side = split.top == (i if split.n_fixed[i] == 0 else split.top[parent[i]])
+        unit = f / np.linalg.norm(f)
+        x, cost = _push_off(x, side, unit, split, w, cost, 1e-7 * scale, scale)
+    return x
 
 
 def _admissible(collapsed, parent, levels, depth, fixed):

@@ -157,9 +157,46 @@ def build_summary(
     lo = min([int(ds.order.min()) for ds in morph.values()] + ([int(reference.order.min())] if heart else []))
     orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
 
+    morph_parts, asym_parts, comp_parts = _cell_parts(morph, orders, reference)
+    for name, values in _cell_extras(runs, best, dims).items():
+        for key in best:
+            morph_parts[key][name] = values[key]
+    for key, r in best.items():
+        gamma = as_float(r.physics.get("gamma"))
+        asym_parts[key]["symmetric_ratio"] = xr.DataArray(
+            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
+        )
+
+    morphometry = stack_cells(morph_parts, dims, cell_coords)
+    morphometry.attrs.update(
+        title="Order-wise morphometry of the lowest-cost tree of every cell",
+        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
+        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
+    )
+    asymmetry = stack_cells(asym_parts, dims, cell_coords)
+    asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
+    groups = {
+        "/": _root(runs, best, dims, output_dir, heart),
+        "/morphometry": morphometry,
+        "/asymmetry": asymmetry,
+        "/costs": cost_group(runs, best, dims, cell_coords),
+        "/anatomy": anatomy_group(runs, dims, cell_coords),
+        "/traces": trace_group(runs, dims, cell_coords),
+    }
+    if heart:
+        groups["/kassab"] = strings_as_objects(reference)
+        groups["/comparison"] = _comparison_group(comp_parts, dims, cell_coords)
+    _scalar_cell_coords(groups, dims, runs)
+    for ds in groups.values():
+        strings_as_objects(ds, inplace=True)
+    return xr.DataTree.from_dict(groups), best, dims
+
+
+def _cell_parts(morph: dict, orders: np.ndarray, reference: xr.Dataset | None) -> tuple[dict, dict, dict]:
+    """Per cell, its best tree's morphometry on the common ``orders`` split into the ``/morphometry``
+    and ``/asymmetry`` parts, and (a heart's, with ``reference``) its comparison with Kassab."""
     morph_parts, asym_parts, comp_parts = {}, {}, {}
     for key, ds in morph.items():
-        r = best[key]
         ds = ds.drop_dims("node").reindex(order=orders)
         for name, var in ds.data_vars.items():  # reindex turns absent counts into NaN: back to 0
             if name.endswith("_count"):
@@ -177,11 +214,16 @@ def build_summary(
         ds.attrs = {}
         asym_parts[key] = ds[list(_ASYMMETRY_VARS)]
         morph_parts[key] = ds.drop_vars(list(_ASYMMETRY_VARS))
-        if heart:
+        if reference is not None:
             comp_parts[key], _ = _comparison_part(ds, reference, orders)
+    return morph_parts, asym_parts, comp_parts
+
+
+def _cell_extras(runs: list[RunInfo], best: dict, dims: list[str]) -> dict[str, dict]:
+    """The per-cell scalars of ``/morphometry``: the best run, the seeds, the trunks' spread and tortuosity."""
     n_seeds = {k: sum(1 for r in runs if r.cell(dims) == k) for k in best}
     trunks = {r.path: _main_trunks_of(r) for r in runs}  # read once: the spread and the tortuosity use them
-    extra = {
+    return {
         "best_seed": cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
         "best_run_id": cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
         "best_cost": cell_var(
@@ -214,29 +256,11 @@ def build_summary(
             "main trunk arc length over chord, mean over inlets, of the best tree (1: straight)",
         ),
     }
-    for name, values in extra.items():
-        for key in best:
-            morph_parts[key][name] = values[key]
-    for key, r in best.items():
-        gamma = as_float(r.physics.get("gamma"))
-        asym_parts[key]["symmetric_ratio"] = xr.DataArray(
-            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
-        )
 
-    morphometry = stack_cells(morph_parts, dims, cell_coords)
-    morphometry.attrs.update(
-        title="Order-wise morphometry of the lowest-cost tree of every cell",
-        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
-        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
-    )
-    asymmetry = stack_cells(asym_parts, dims, cell_coords)
-    asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
-    costs = cost_group(runs, best, dims, cell_coords)
-    anatomy = anatomy_group(runs, dims, cell_coords)
-    traces = trace_group(runs, dims, cell_coords)
 
-    tissues = sorted({r.tissue for r in runs})
-    root = xr.Dataset(
+def _root(runs: list[RunInfo], best: dict, dims: list[str], output_dir, heart: bool) -> xr.Dataset:
+    """The root group: what the summary is of (its attributes only)."""
+    return xr.Dataset(
         attrs={
             "title": "vasc_pipeline sweep summary",
             "Conventions": "CF-1.10",
@@ -245,34 +269,25 @@ def build_summary(
             "cell_dims": list(dims),
             "n_runs": len(runs),
             "n_cells": len(best),
-            "tissues": tissues,
+            "tissues": sorted({r.tissue for r in runs}),
             "comparison_scheme": COMPARISON_SCHEME,
             "comparison_level": COMPARISON_LEVEL,
             "organ": "heart" if heart else "other",
         }
     )
-    groups = {
-        "/": root,
-        "/morphometry": morphometry,
-        "/asymmetry": asymmetry,
-        "/costs": costs,
-        "/anatomy": anatomy,
-        "/traces": traces,
-    }
-    if heart:
-        groups["/kassab"] = strings_as_objects(reference)
-        groups["/comparison"] = _comparison_group(comp_parts, dims, cell_coords)
+
+
+def _scalar_cell_coords(groups: dict, dims: list[str], runs: list[RunInfo]) -> None:
+    """One tissue or one method in the whole sweep: a scalar coordinate on every cell group (in place)."""
     cell_groups = [name for name in groups if name not in ("/", "/kassab")]
-    if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
+    if "tissue" not in dims:
+        tissue = sorted({r.tissue for r in runs})[0]
         for name in cell_groups:
-            groups[name] = groups[name].assign_coords(tissue=((), tissues[0], CELL_META["tissue"]))
-    if "method" not in dims:  # one method: likewise
+            groups[name] = groups[name].assign_coords(tissue=((), tissue, CELL_META["tissue"]))
+    if "method" not in dims:
         method = runs[0].method
         for name in cell_groups:
             groups[name] = groups[name].assign_coords(method=((), method, CELL_META["method"]))
-    for ds in groups.values():
-        strings_as_objects(ds, inplace=True)
-    return xr.DataTree.from_dict(groups), best, dims
 
 
 def _comparison_group(comp_parts: dict, dims: list[str], cell_coords: dict) -> xr.Dataset:
