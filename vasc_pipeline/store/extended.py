@@ -36,7 +36,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-from .group import GroupStore, StoreError, jsonable, run_lock
+from .group import GroupStore, StoreError, create_group, jsonable, run_lock
 from .run_store import STATUS_COMPLETE, STATUS_RUNNING
 
 __all__ = ["ExtendedStore", "EXTENDED_FORMAT", "TREE_CHUNK", "extended_lock", "identity_hash"]
@@ -114,11 +114,7 @@ class ExtendedStore(GroupStore):
             "wall_seconds": 0.0,
             "sessions": [],
         }
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
-        except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
-            raise StoreError(f"extended store {str(path)!r} already exists") from exc
+        group = create_group(path, attrs, "extended store")
         tree = group.require_group("tree")
         for name, dtype, dims, long_name, units in _TREE:
             tree.create_array(

@@ -15,7 +15,15 @@ from typing import IO, Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-__all__ = ["GroupStore", "StoreError", "file_lock", "jsonable", "run_lock", "write_whole_array"]
+__all__ = [
+    "GroupStore",
+    "StoreError",
+    "create_group",
+    "file_lock",
+    "jsonable",
+    "run_lock",
+    "write_whole_array",
+]
 
 
 class StoreError(OSError):
@@ -83,6 +91,16 @@ def write_whole_array(group: zarr.Group, name: str, data: np.ndarray, dtype, dim
         attributes=attributes,
     )
     arr[...] = data
+
+
+def create_group(path: Path, attrs: dict, what: str) -> zarr.Group:
+    """A new root Zarr group at ``path`` with ``attrs`` (its parent directories made); StoreError,
+    naming the store as ``what``, when one is already there (never overwritten)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
+    except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
+        raise StoreError(f"{what} {str(path)!r} already exists") from exc
 
 
 class GroupStore:

@@ -51,7 +51,7 @@ import zarr
 from ..config.identity import SWEEP_AXES, config_differences, config_hash, hashed_config, identity_differences
 from ..config.schema import ConfigError
 from .checkpoints import CHECKPOINTS, Checkpoint, CheckpointsMixin, CheckpointWarning, crc32
-from .group import GroupStore, StoreError, file_lock, jsonable, run_lock, write_whole_array
+from .group import GroupStore, StoreError, create_group, file_lock, jsonable, run_lock, write_whole_array
 from .layout import RUNS_DIR, run_path
 from .trace import TRACE_FIELDS, TRACE_NAMES
 
@@ -154,11 +154,7 @@ class RunStore(GroupStore, CheckpointsMixin):
             "trace_length": 0,
             "resumes": [],
         }
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
-        except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
-            raise StoreError(f"run store {str(path)!r} already exists") from exc
+        group = create_group(path, attrs, "run store")
         store = cls(path, group)
         store._create_trace()
         return store
