@@ -3,7 +3,7 @@
 :mod:`~vasc_pipeline.engine.problem` builds the problem and its kernel state,
 :mod:`~vasc_pipeline.engine.run` runs the anneal loop, :mod:`~vasc_pipeline.engine.polish`
 the final polish and swap descent, :mod:`~vasc_pipeline.engine.cco` the constructive
-baseline (with :mod:`~vasc_pipeline.engine.fermat`, its local problem). Usable without
+baseline (its numba kernel in :mod:`~vasc_pipeline.kernel.growth`). Usable without
 Hydra or Dask::
 
     from vasc_pipeline import config, engine

@@ -97,6 +97,24 @@ def build_problem(config: Any) -> Problem:
     validated first (:func:`vasc_pipeline.config.validate`).
     """
     cfg = validate(to_run_config(config))
+    tissue, sites = _tissue_and_sites(cfg)
+    physics = _physics(cfg, tissue)
+    terms = active_terms(physics, cfg.terminals.fixed)
+    schedule = Schedule.of(cfg, exclusion=terms.exclusion)
+    cells = _neighbour_cells(cfg.anneal, physics, tissue)
+    _check_start_temperature(cfg.anneal, physics, cfg.n_terminals)
+    check_voxel_scale(tissue, physics.supply_radius, cfg.n_terminals)
+    model = _kernel_model(cfg, tissue, physics, terms, schedule, cells)
+    coarse_model = None
+    if schedule.coarse > 0:
+        coarse_model = model._replace(
+            **kernel.exclusion_fields(tissue.exclusion_grid.coarsened(cfg.anneal.coarse_exclusion_factor))
+        )
+    return Problem(cfg, physics, tissue, terms, model, schedule, sites, coarse_model)
+
+
+def _tissue_and_sites(cfg: RunConfig) -> tuple[Tissue, np.ndarray | None]:
+    """The config's tissue and given terminal sites (or None), checked against N and the inlets."""
     params = {k: v for k, v in asdict(cfg.tissue).items() if k != "name"}
     n = cfg.n_terminals
     tissue = build_tissue(cfg.tissue.name, n, total_flow=cfg.physics.total_flow, **params)
@@ -118,11 +136,15 @@ def build_problem(config: Any) -> Problem:
             f"tissue.inlet_share lists {len(share)} fractions; tissue {tissue.name!r} has {k} inlets ({names})"
             + share_set_by_model(cfg)
         )
-    p = cfg.physics
-    # Field by field: the config's physics as given, plus what the problem fixes (N, K, R_supply).
-    physics = Physics(
+    return tissue, sites
+
+
+def _physics(cfg: RunConfig, tissue: Tissue) -> Physics:
+    """Field by field: the config's physics as given, plus what the problem fixes (N, K, R_supply)."""
+    p, n = cfg.physics, cfg.n_terminals
+    return Physics(
         n_terminals=n,
-        n_inlets=k,
+        n_inlets=len(tissue.inlets),
         gamma=p.gamma,
         inlet_radius=p.inlet_radius,
         total_flow=p.total_flow,
@@ -138,11 +160,11 @@ def build_problem(config: Any) -> Problem:
         pressure_inlet=p.pressure_inlet,
         pressure_terminal=p.pressure_terminal,
     )
-    terms = active_terms(physics, cfg.terminals.fixed)
-    w_o, w_p, w_s = physics.weights
+
+
+def _neighbour_cells(a, physics: Physics, tissue: Tissue) -> tuple[float, np.ndarray]:
+    """(cell size [m], cell shape) of the local swap partners' neighbour cells (at most 2e7 cells)."""
     lo, hi = tissue.bounds
-    schedule = Schedule.of(cfg, exclusion=terms.exclusion)
-    a = cfg.anneal
     cell_size = a.neighbour_cell * physics.supply_radius
     cell_shape = np.maximum(np.ceil((hi - lo) / cell_size), 1).astype(np.int64)
     if tissue.ndim == 2:
@@ -152,6 +174,11 @@ def build_problem(config: Any) -> Problem:
             f"anneal.neighbour_cell={a.neighbour_cell} gives {int(np.prod(cell_shape))} neighbour "
             "cells (at most 2e7); use a larger value (in R_supply; fast: 2, paper and fast_v1: 1)"
         )
+    return cell_size, cell_shape
+
+
+def _check_start_temperature(a, physics: Physics, n: int) -> None:
+    """A given anneal.T_start must exceed the end temperature: the schedule never warms up."""
     t_end = scheduled_T_end(a, physics)
     if a.T_start is not None and not a.T_start > t_end:
         where = "anneal.T_end" if a.T_end is not None else f"anneal.T_end_rel={a.T_end_rel:g} times w(1) R_supply"
@@ -159,12 +186,18 @@ def build_problem(config: Any) -> Problem:
             f"anneal.T_start={a.T_start:g} W must exceed the end temperature, {t_end:.4g} W "
             f"({where}, at n_terminals={n}); the schedule would warm up"
         )
-    check_voxel_scale(tissue, physics.supply_radius, n)
+
+
+def _kernel_model(cfg: RunConfig, tissue: Tissue, physics: Physics, terms, schedule: Schedule, cells) -> kernel.Model:
+    """The kernel's :class:`~vasc_pipeline.kernel.Model`: every array and scalar the anneal reads."""
+    a, p, n = cfg.anneal, cfg.physics, cfg.n_terminals
+    w_o, w_p, w_s = physics.weights
+    lo, hi = tissue.bounds
+    cell_size, cell_shape = cells
     rho = physics.supply_radius / tissue.voxel_size
     sphere_voxels = math.pi * rho**2 if tissue.ndim == 2 else 4.0 / 3.0 * math.pi * rho**3  # C_s scale of one move
-
-    model = kernel.Model(
-        n_inlets=k,
+    return kernel.Model(
+        n_inlets=physics.n_inlets,
         n_terminals=n,
         tables=cost_tables(physics).array,
         mask=tissue.mask,
@@ -220,12 +253,6 @@ def build_problem(config: Any) -> Problem:
             else np.ascontiguousarray(tissue.supply_target, dtype=np.uint8)
         ),
     )
-    coarse_model = None
-    if schedule.coarse > 0:
-        coarse_model = model._replace(
-            **kernel.exclusion_fields(tissue.exclusion_grid.coarsened(a.coarse_exclusion_factor))
-        )
-    return Problem(cfg, physics, tissue, terms, model, schedule, sites, coarse_model)
 
 
 def supply_dtype(n_terminals: int) -> type:

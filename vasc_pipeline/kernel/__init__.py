@@ -9,10 +9,13 @@ The kernel sees only two named tuples of arrays and scalars (built by
 - :mod:`~vasc_pipeline.kernel.supply`: the supply count map, spheres and shells
 - :mod:`~vasc_pipeline.kernel.pressure`: the pressure term
 - :mod:`~vasc_pipeline.kernel.cells`: neighbour cells for local swap partners
-- :mod:`~vasc_pipeline.kernel.moves`: translate and swap, their ΔC and commit
+- :mod:`~vasc_pipeline.kernel.moves`: translate, its ΔC and commit, the helpers both moves share
+- :mod:`~vasc_pipeline.kernel.swaps`: swap two subtrees, its ΔC
 - :mod:`~vasc_pipeline.kernel.loop`: initialise, :func:`anneal_block`, uphill sampling
 - :mod:`~vasc_pipeline.kernel.packing`: the packing phase (supply term alone)
 - :mod:`~vasc_pipeline.kernel.margins`: voxels near another part's region (a tree in parts)
+- :mod:`~vasc_pipeline.kernel.growth`: the CCO growth (``method=cco``), one terminal at a time
+- :mod:`~vasc_pipeline.kernel.fermat`: the weighted Fermat-Weber point, a CCO connection's optimum
 
 :func:`anneal_block` runs a block of proposed moves from ``state`` and returns; the
 temperature and every random draw depend only on the step number and the saved state, so
@@ -38,6 +41,15 @@ from .exclusion import (
     segment_exclusion,
     segment_exclusion_capped,
 )
+from .fermat import (
+    fermat_point,
+)
+from .growth import (
+    MAX_FORBIDDEN_REFUSALS,
+    connection_cost,
+    crosses,
+    grow_terminals,
+)
 from .loop import (
     anneal_block,
     initialise,
@@ -48,8 +60,6 @@ from .loop import (
 )
 from .moves import (
     legal_position,
-    swap_nodes,
-    swap_random,
 )
 from .pressure import (
     pressure_cost,
@@ -96,6 +106,10 @@ from .supply import (
     supply_move,
     supply_move_delta,
     supply_sphere,
+)
+from .swaps import (
+    swap_nodes,
+    swap_random,
 )
 
 __all__ = [
@@ -156,4 +170,9 @@ __all__ = [
     "sample_uphill",
     "scaled_total_without_supply",
     "translate_node",
+    "fermat_point",
+    "MAX_FORBIDDEN_REFUSALS",
+    "connection_cost",
+    "crosses",
+    "grow_terminals",
 ]

@@ -14,11 +14,12 @@ from ..model.physics import TABLE_POWER, TABLE_VOLUME
 from ..model.rng import next_below, next_double
 from .cells import build_cells
 from .exclusion import _distance3, recompute_exclusion
-from .moves import _adapt_step, _swap, _translate_node, _translation
+from .moves import _adapt_step, _translate_node, _translation
 from .pressure import pressure_cost
 from .schedule import temperature, weighted_total
 from .state import ACCEPTED, COUNTER_STEP, EXCLUSION, ILLEGAL, POWER, PRESSURE, SUPPLY, VOLUME, _add
 from .supply import supply_sphere
+from .swaps import _swap
 
 __all__ = [
     "anneal_block",

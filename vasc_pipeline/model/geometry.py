@@ -25,7 +25,8 @@ are factorised in children-first order, which creates no fill-in, so each is O(N
 
 :mod:`vasc_pipeline.engine.polish` applies the optimum to an annealed state (the polish);
 :mod:`vasc_pipeline.model.topology_search` applies it to every topology of a small
-fixed-terminal instance for the global optimum that the tests compare against.
+fixed-terminal instance for the global optimum that the tests compare against. The contracted
+problem (clusters, the smooth objective and its Newton systems) is :mod:`vasc_pipeline.model.contraction`.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .contraction import Contraction, gradient_hessian, node_levels, objective, solve_spd, spread
 from .physics import Physics, cost_tables
 from .topology import node_depth, segment_lengths
 from .tree import KIND_BIFURCATION, Tree
@@ -85,126 +87,6 @@ def vascular_cost(position: np.ndarray, parent: np.ndarray, weights: np.ndarray)
     """sum_i w_i |x_i - x_parent(i)| over segments [W]."""
     seg = parent >= 0
     return float(np.sum(weights[seg] * segment_lengths(parent, position)[seg]))
-
-
-# --------------------------------------------------------------------------------------
-# Tree bookkeeping
-
-
-def _levels(children: np.ndarray, roots: np.ndarray) -> list[np.ndarray]:
-    """Nodes by depth below the roots (level 0 = roots), each level in breadth-first order.
-
-    Not :func:`vasc_pipeline.model.topology.node_depth` grouped by depth: the order within a level
-    fixes the order of the ``np.add.at`` sums in :func:`_side_forces`, so results stay
-    bit-identical with the trees this solver has always produced.
-    """
-    levels = []
-    frontier = roots
-    while frontier.size:
-        levels.append(frontier)
-        ch = children[frontier].ravel()
-        frontier = ch[ch >= 0]
-    return levels
-
-
-class _Contraction:
-    """Clusters of nodes joined by zero-length ("collapsed") segments.
-
-    A cluster is a connected subtree; its top node (the member whose own segment is not
-    collapsed) represents it. A cluster holding an inlet or terminal is fixed.
-    """
-
-    def __init__(self, parent, levels, depth, fixed, collapsed):
-        self.collapsed = collapsed
-        self.fixed_node = fixed
-        top = np.arange(parent.size)
-        for lev in levels[1:]:  # parents before children
-            top[lev] = np.where(collapsed[lev], top[parent[lev]], lev)
-        self.top = top
-        n_fixed = np.bincount(top, weights=fixed, minlength=parent.size)
-        self.n_fixed = n_fixed
-        tops = np.flatnonzero(top == np.arange(parent.size))
-        free_tops = tops[n_fixed[tops] == 0]
-        # Children-first order (deepest first): eliminating a cluster whose other
-        # neighbours are already gone creates no fill-in in the tree-structured systems.
-        self.free = free_tops[np.argsort(-depth[free_tops], kind="stable")]
-        self.var = np.full(parent.size, -1, dtype=np.int64)
-        self.var[self.free] = np.arange(self.free.size)
-        # External segments: not collapsed; they join cluster a = i and b = top[parent[i]].
-        seg = np.flatnonzero((parent >= 0) & ~collapsed)
-        self.seg = seg
-        self.a = seg
-        self.b = top[parent[seg]]
-
-
-def _spread(x: np.ndarray, con: _Contraction) -> None:
-    """Every node takes its cluster's position: the fixed member's if it has one, else the top node's.
-
-    A fixed cluster's top may be a bifurcation above its inlet or terminal (contracted
-    while still a little apart); the fixed node must not move to it.
-    """
-    fixed = np.flatnonzero(con.fixed_node)
-    x[con.top[fixed]] = x[fixed]
-    x[:] = x[con.top]
-
-
-# --------------------------------------------------------------------------------------
-# Smooth objective of the contracted problem
-
-
-def _objective(x, con, w):
-    d = x[con.a] - x[con.b]
-    return float(np.sum(w[con.seg] * np.sqrt(np.einsum("ij,ij->i", d, d))))
-
-
-def _gradient_hessian(x, con, w, dim, with_hessian=True):
-    """Gradient (n_free * dim,) and sparse Hessian of the contracted objective."""
-    d = x[con.a] - x[con.b]
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    ws = w[con.seg]
-    u = d / length[:, None]
-    va, vb = con.var[con.a], con.var[con.b]
-    nf = con.free.size
-    g = np.zeros((nf, dim))
-    fa, fb = va >= 0, vb >= 0
-    np.add.at(g, va[fa], ws[fa, None] * u[fa])
-    np.add.at(g, vb[fb], -ws[fb, None] * u[fb])
-    if not with_hessian:
-        return g.ravel(), None
-    # Per segment block h = w / L (I - u u^T); +h on both diagonal blocks, -h off-diagonal.
-    h = (ws / length)[:, None, None] * (np.eye(dim)[None] - u[:, :, None] * u[:, None, :])
-    ii, jj = np.meshgrid(np.arange(dim), np.arange(dim), indexing="ij")
-    rows, cols, vals = [], [], []
-
-    def block(vr, vc, hs, sign):
-        rows.append((vr[:, None, None] * dim + ii[None]).ravel())
-        cols.append((vc[:, None, None] * dim + jj[None]).ravel())
-        vals.append((sign * hs).ravel())
-
-    block(va[fa], va[fa], h[fa], 1.0)
-    block(vb[fb], vb[fb], h[fb], 1.0)
-    both = fa & fb
-    block(va[both], vb[both], h[both], -1.0)
-    block(vb[both], va[both], h[both], -1.0)
-    n = nf * dim
-    hess = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-    return g.ravel(), hess
-
-
-def _solve_spd(hess, rhs, scale):
-    """Solve a tree-structured SPD system in its given (children-first) order: no fill-in."""
-    n = hess.shape[0]
-    diag = hess.diagonal()
-    if n and float(np.max(diag)) <= 0.0:
-        # Every segment lies along one line (fixed nodes collinear): the objective is
-        # piecewise linear, without curvature. Step along the descent direction, length
-        # ``scale``; the line search shortens it and the kinks are then contracted.
-        return rhs * (scale / max(float(np.linalg.norm(rhs)), 1e-300))
-    # A tiny ridge guards the exactly singular cases (all segments at a node collinear).
-    ridge = 1e-13 * float(np.max(diag)) if n else 0.0
-    a = (hess + sp.diags(np.full(n, ridge))).tocsc()
-    lu = spla.splu(a, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return lu.solve(rhs)
 
 
 # --------------------------------------------------------------------------------------
@@ -295,12 +177,12 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, reopened, stall=20):
     contract = degenerate(np.linalg.norm(x[con.a] - x[con.b], axis=1))
     if np.any(contract):
         return x, 0, con.seg[contract]
-    f = _objective(x, con, w)
+    f = objective(x, con, w)
     for it in range(max_iter):
         if it >= stall:
             return x, it, short_segments()
-        g, hess = _gradient_hessian(x, con, w, dim)
-        step = _solve_spd(hess, -g, scale)
+        g, hess = gradient_hessian(x, con, w, dim)
+        step = solve_spd(hess, -g, scale)
         slope = float(g @ step)
         if -slope <= 1e-15 * f:  # Newton decrement: the remaining decrease is below rounding
             return x, it, None
@@ -309,7 +191,7 @@ def _newton(x, con, w, dim, scale, collapse_tol, max_iter, reopened, stall=20):
         while True:
             trial = x.copy()
             trial[con.free] += t * step
-            f_trial = _objective(trial, con, w)
+            f_trial = objective(trial, con, w)
             if f_trial <= f + 1e-4 * t * slope:
                 break
             t *= 0.5
@@ -334,7 +216,7 @@ def _push_off(x, side, unit, con, w, cost, push, scale):
     def pushed(by):
         trial = x.copy()
         trial[side] += by * unit
-        return trial, _objective(trial, con, w)
+        return trial, objective(trial, con, w)
 
     for _ in range(20):
         best, best_cost = pushed(push)
@@ -420,68 +302,12 @@ def optimal_bifurcations(
     m = parent.size
     fixed = tree.kind != KIND_BIFURCATION
     free = ~fixed
-    children = tree.children
-    levels = _levels(children, np.flatnonzero(parent < 0))
-    depth = node_depth(parent)
-    # Work in the affine hull of the fixed nodes: the optimum lies in their convex hull,
-    # and dropping the flat directions (a 2-D tissue's z) keeps the Newton systems regular.
-    p_fixed = tree.position[fixed]
-    centre = p_fixed.mean(axis=0)
-    _, sv, vt = np.linalg.svd(p_fixed - centre, full_matrices=False)
-    scale = float(np.max(np.linalg.norm(p_fixed - centre, axis=1))) or 1.0
-    basis = vt[sv > 1e-12 * max(float(sv[0]), 1e-300)]
-    dim = basis.shape[0]
+    centre, basis, scale = _affine_frame(tree.position[fixed])
     x = (tree.position - centre) @ basis.T
     iterations = 0
     converged = True
-    collapsed = np.zeros(m, dtype=bool)
-    reopened = np.zeros(m, dtype=bool)
-    if dim > 0 and np.any(free):
-        x, iterations = _weiszfeld(x, parent, w, free, depth, scale, 30)
-        seg = parent >= 0
-        length = segment_lengths(parent, x)
-        collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
-        converged = False
-        for _ in range(max_rounds):
-            con = _Contraction(parent, levels, depth, fixed, collapsed)
-            _spread(x, con)
-            x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton, reopened)
-            _spread(x, con)  # Newton moves only the clusters' top nodes
-            iterations += its
-            if short is not None:
-                candidate = collapsed.copy()
-                candidate[short] = True
-                collapsed = _admissible(candidate, parent, levels, depth, fixed)
-                continue
-            idx, force, _ = _side_forces(x, parent, w, levels, con)
-            if idx.size == 0:
-                converged = its < max_newton
-                break
-            excess = np.linalg.norm(force, axis=1) - w[idx]
-            bad = excess > 1e-9 * w[idx]
-            if not np.any(bad):
-                converged = its < max_newton
-                break
-            # Reopen the worst violated segment of each cluster; push its movable side off
-            # along the pull so Newton starts on the side where the segment has length.
-            # A push of fixed length can overshoot a node closer than it (terminals a hair
-            # apart), or leave the reopened segment the shortest (collinear nodes, where
-            # Newton has no curvature to go on): either way the next round contracts a
-            # segment the check then reopens, round after round. Hence the line search.
-            cand = idx[bad]
-            order = np.argsort(-excess[bad])
-            cand, dirs = cand[order], force[bad][order]
-            _, first = np.unique(con.top[cand], return_index=True)
-            cand, dirs = cand[first], dirs[first]
-            collapsed[cand] = False
-            reopened[cand] = True
-            split = _Contraction(parent, levels, depth, fixed, collapsed)
-            cost = _objective(x, split, w)
-            for i, f in zip(cand, dirs):
-                # The side without a fixed node is the one the pull acts on.
-                side = split.top == (i if split.n_fixed[i] == 0 else split.top[parent[i]])
-                unit = f / np.linalg.norm(f)
-                x, cost = _push_off(x, side, unit, split, w, cost, 1e-7 * scale, scale)
+    if basis.shape[0] > 0 and np.any(free):
+        x, iterations, converged = _solve(x, tree, w, scale, collapse_tol, max_newton, max_rounds)
     position = tree.position.copy()
     position[free] = centre + x[free] @ basis
     if bounds is not None:
@@ -493,11 +319,87 @@ def optimal_bifurcations(
     return BifurcationOptimum(position, vascular_cost(position, parent, w), final, converged, iterations)
 
 
+def _affine_frame(p_fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(centre, basis (dim, 3), scale) of the affine hull of the fixed nodes.
+
+    The solver works in it: the optimum lies in the fixed nodes' convex hull, and dropping the
+    flat directions (a 2-D tissue's z) keeps the Newton systems regular.
+    """
+    centre = p_fixed.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p_fixed - centre, full_matrices=False)
+    scale = float(np.max(np.linalg.norm(p_fixed - centre, axis=1))) or 1.0
+    basis = vt[sv > 1e-12 * max(float(sv[0]), 1e-300)]
+    return centre, basis, scale
+
+
+def _solve(x, tree: Tree, w, scale, collapse_tol, max_newton, max_rounds) -> tuple[np.ndarray, int, bool]:
+    """The three stages (module docstring) from positions ``x`` in the affine frame:
+    Weiszfeld, then rounds of Newton on the contracted problem and the optimality check.
+    Returns (x, iterations, converged)."""
+    parent = tree.parent
+    fixed = tree.kind != KIND_BIFURCATION
+    levels = node_levels(tree.children, np.flatnonzero(parent < 0))
+    depth = node_depth(parent)
+    dim = x.shape[1]
+    reopened = np.zeros(parent.size, dtype=bool)
+    x, iterations = _weiszfeld(x, parent, w, ~fixed, depth, scale, 30)
+    seg = parent >= 0
+    length = segment_lengths(parent, x)
+    collapsed = _admissible(seg & (length < collapse_tol * scale), parent, levels, depth, fixed)
+    for _ in range(max_rounds):
+        con = Contraction(parent, levels, depth, fixed, collapsed)
+        spread(x, con)
+        x, its, short = _newton(x, con, w, dim, scale, collapse_tol, max_newton, reopened)
+        spread(x, con)  # Newton moves only the clusters' top nodes
+        iterations += its
+        if short is not None:
+            candidate = collapsed.copy()
+            candidate[short] = True
+            collapsed = _admissible(candidate, parent, levels, depth, fixed)
+            continue
+        idx, force, _ = _side_forces(x, parent, w, levels, con)
+        if idx.size == 0:
+            return x, iterations, its < max_newton
+        excess = np.linalg.norm(force, axis=1) - w[idx]
+        bad = excess > 1e-9 * w[idx]
+        if not np.any(bad):
+            return x, iterations, its < max_newton
+        topology = (parent, levels, depth, fixed)
+        x = _reopen(x, idx[bad], force[bad], excess[bad], con, collapsed, reopened, topology, w, scale)
+    return x, iterations, False
+
+
+def _reopen(x, idx, force, excess, con, collapsed, reopened, topology, w, scale) -> np.ndarray:
+    """Reopen the worst violated segment of each cluster (``collapsed`` and ``reopened`` in place);
+    push its movable side off along the pull so Newton starts on the side where the segment has length.
+
+    A push of fixed length can overshoot a node closer than it (terminals a hair apart), or leave
+    the reopened segment the shortest (collinear nodes, where Newton has no curvature to go on):
+    either way the next round contracts a segment the check then reopens, round after round.
+    Hence the line search (:func:`_push_off`).
+    """
+    parent, levels, depth, fixed = topology
+    order = np.argsort(-excess)
+    cand, dirs = idx[order], force[order]
+    _, first = np.unique(con.top[cand], return_index=True)
+    cand, dirs = cand[first], dirs[first]
+    collapsed[cand] = False
+    reopened[cand] = True
+    split = Contraction(parent, levels, depth, fixed, collapsed)
+    cost = objective(x, split, w)
+    for i, f in zip(cand, dirs):
+        # The side without a fixed node is the one the pull acts on.
+        side = split.top == (i if split.n_fixed[i] == 0 else split.top[parent[i]])
+        unit = f / np.linalg.norm(f)
+        x, cost = _push_off(x, side, unit, split, w, cost, 1e-7 * scale, scale)
+    return x
+
+
 def _admissible(collapsed, parent, levels, depth, fixed):
     """Drop collapsed segments that would join two fixed nodes into one cluster."""
     collapsed = collapsed.copy()
     while True:
-        con = _Contraction(parent, levels, depth, fixed, collapsed)
+        con = Contraction(parent, levels, depth, fixed, collapsed)
         bad = con.n_fixed[con.top] > 1
         if not np.any(bad & collapsed):
             return collapsed

@@ -156,92 +156,24 @@ def extend_run(
     started = time.monotonic()
     source = read_source(source_path)
     plan = plan_extension(source, int(n_terminals), seed, method)
-    g = plan.growth
-    config = {
-        "n_terminals_requested": int(n_terminals),
-        "n_terminals": plan.n_fine,
-        "per_territory": g.per_territory,
-        "seed": g.seed,
-        "method": {"candidates": g.candidates, "max_tries": g.max_tries, "shrink": g.shrink},
-    }
-    info = {
-        "store": str(Path(source_path).resolve()),
-        "run_id": source.run_id,
-        "digest": source.digest,
-        "config_hash": source.config_hash,
-    }
     out_path = Path(out_path)
     plan_seconds = time.monotonic() - started
     with extended_lock(out_path):
-        if ExtendedStore.exists(out_path):
-            store = ExtendedStore.open(out_path, mode="r+")
-            attrs = store.attrs
-            if attrs.get("identity") != identity_hash(config, source.digest):
-                diff = _differences(attrs.get("config", {}), config)
-                if attrs.get("source", {}).get("digest") != source.digest:
-                    diff.append(f"the source run {source.run_id} differs from the one extended ({source_path})")
-                raise ExtendError(
-                    f"extended store {str(out_path)!r} was made with another configuration: {'; '.join(diff)}. "
-                    "Restore those settings (extend.n_terminals, extend.seed, method.*) to resume it, or move "
-                    "it aside for the new one"
-                )
-            if attrs.get("status") == STATUS_COMPLETE:
-                return {
-                    "run_id": source.run_id,
-                    "status": "skipped",
-                    "resumed_from": None,
-                    "path": str(out_path),
-                    "n_terminals": plan.n_fine,
-                    "wall_seconds": 0.0,
-                    "cost": attrs.get("cost", {}),
-                    "statistics": attrs.get("statistics", {}),
-                }
-        else:
-            if is_empty_leftover(out_path):
-                out_path.rmdir()
-            store = ExtendedStore.create(
-                out_path,
-                run_id=source.run_id,
-                source=info,
-                config=config,
-                n_nodes=plan.n_nodes,
-                n_territories=plan.n_territories,
-                physics=plan.whole_physics.as_attrs(),
-                territory_fields=TERRITORY_FIELDS,
-            )
+        store = _open_or_create(out_path, source_path, source, plan, _identity_config(plan, n_terminals))
+        attrs = store.attrs
+        if attrs.get("status") == STATUS_COMPLETE:
+            cost, statistics = attrs.get("cost", {}), attrs.get("statistics", {})
+            return _outcome(source, "skipped", None, out_path, plan, 0.0, cost, statistics)
         store.start_session()
         wall_before = float(store.attrs.get("wall_seconds", 0.0))
         resumed_from = store.territories_done or None
         if store.nodes_committed == 0:
             store.append(plan.annealed_part(), None, 0, wall_before)
-        total = plan.n_territories
-        done = store.territories_done
-        stream.write(
-            f"vasc_pipeline: extend {source.run_id}: {plan.n_fine} fine terminals ({g.per_territory} in each of "
-            f"{total} territories"
-            + (
-                f"; extend.n_terminals={n_terminals} rounded to a multiple of N = {total}"
-                if plan.n_fine != int(n_terminals)
-                else ""
-            )
-            + (f"; resuming after {done} territories" if done else "")
-            + f") into {out_path}\n"
+        _announce(stream, source, plan, n_terminals, out_path, store.territories_done)
+        clock = (wall_before, started)
+        grow_seconds = _grow_territories(
+            store, plan, mapper, batch_territories, clock, stream, progress_interval, compile_first
         )
-        stream.flush()
-        if compile_first and done < total:
-            grow_batch(g, plan.batch(done, done + 1))
-        progress = ExtendProgress(source.run_id, total, done, g.per_territory, stream, progress_interval)
-        grow_started = time.monotonic()
-        size = max(1, int(batch_territories))
-        batches = (plan.batch(lo, min(lo + size, total)) for lo in range(done, total, size))
-        for result in mapper(partial(grow_batch, g), batches):
-            n = len(result["n_voxels"])
-            tree = {k: result[k] for k in ("parent", "position", "radius", "kind")}
-            columns = {name: result[name] for name, *_ in TERRITORY_FIELDS}
-            store.append(tree, columns, n, wall_before + time.monotonic() - started)
-            progress.update(store.territories_done)
-        progress.close()
-        grow_seconds = time.monotonic() - grow_started
         finish_started = time.monotonic()
         cost, statistics = _summary(plan, store.read_territories())
         wall = wall_before + time.monotonic() - started
@@ -251,17 +183,116 @@ def extend_run(
             "finish_seconds": time.monotonic() - finish_started,
         }
         store.finish(cost=cost, statistics=statistics, timings=timings, wall_seconds=wall)
+    _report_complete(stream, source.run_id, wall, cost, statistics)
+    return _outcome(source, "complete", resumed_from, out_path, plan, wall, cost, statistics)
+
+
+def _identity_config(plan, n_terminals) -> dict:
+    """The settings an extended store is made with (its identity, with the source's digest)."""
+    g = plan.growth
+    return {
+        "n_terminals_requested": int(n_terminals),
+        "n_terminals": plan.n_fine,
+        "per_territory": g.per_territory,
+        "seed": g.seed,
+        "method": {"candidates": g.candidates, "max_tries": g.max_tries, "shrink": g.shrink},
+    }
+
+
+def _open_or_create(out_path: Path, source_path, source, plan, config: dict) -> ExtendedStore:
+    """The extended store at ``out_path``: reopened when it was made with this configuration and
+    source (ExtendError otherwise), else created (an empty leftover directory replaced)."""
+    if ExtendedStore.exists(out_path):
+        store = ExtendedStore.open(out_path, mode="r+")
+        attrs = store.attrs
+        if attrs.get("identity") != identity_hash(config, source.digest):
+            diff = _differences(attrs.get("config", {}), config)
+            if attrs.get("source", {}).get("digest") != source.digest:
+                diff.append(f"the source run {source.run_id} differs from the one extended ({source_path})")
+            raise ExtendError(
+                f"extended store {str(out_path)!r} was made with another configuration: {'; '.join(diff)}. "
+                "Restore those settings (extend.n_terminals, extend.seed, method.*) to resume it, or move "
+                "it aside for the new one"
+            )
+        return store
+    if is_empty_leftover(out_path):
+        out_path.rmdir()
+    info = {
+        "store": str(Path(source_path).resolve()),
+        "run_id": source.run_id,
+        "digest": source.digest,
+        "config_hash": source.config_hash,
+    }
+    return ExtendedStore.create(
+        out_path,
+        run_id=source.run_id,
+        source=info,
+        config=config,
+        n_nodes=plan.n_nodes,
+        n_territories=plan.n_territories,
+        physics=plan.whole_physics.as_attrs(),
+        territory_fields=TERRITORY_FIELDS,
+    )
+
+
+def _announce(stream: TextIO, source, plan, n_terminals, out_path: Path, done: int) -> None:
+    """The line that says what is grown: fine terminals, territories, rounding, resumption."""
+    total = plan.n_territories
+    stream.write(
+        f"vasc_pipeline: extend {source.run_id}: {plan.n_fine} fine terminals ({plan.growth.per_territory} in each of "
+        f"{total} territories"
+        + (
+            f"; extend.n_terminals={n_terminals} rounded to a multiple of N = {total}"
+            if plan.n_fine != int(n_terminals)
+            else ""
+        )
+        + (f"; resuming after {done} territories" if done else "")
+        + f") into {out_path}\n"
+    )
+    stream.flush()
+
+
+def _grow_territories(store, plan, mapper, batch_territories, clock, stream, progress_interval, compile_first) -> float:
+    """Grow the territories not yet in ``store``, a batch a task, appended in order as they come;
+    returns the seconds the growth took (after the compilation).
+
+    ``clock``: (wall seconds of earlier sessions, this session's start on ``time.monotonic``).
+    With ``compile_first`` one territory is grown here first, so that workers load compiled kernels.
+    """
+    g, total, done = plan.growth, plan.n_territories, store.territories_done
+    wall_before, started = clock
+    if compile_first and done < total:
+        grow_batch(g, plan.batch(done, done + 1))
+    progress = ExtendProgress(plan.source.run_id, total, done, g.per_territory, stream, progress_interval)
+    grow_started = time.monotonic()
+    size = max(1, int(batch_territories))
+    batches = (plan.batch(lo, min(lo + size, total)) for lo in range(done, total, size))
+    for result in mapper(partial(grow_batch, g), batches):
+        tree = {k: result[k] for k in ("parent", "position", "radius", "kind")}
+        columns = {name: result[name] for name, *_ in TERRITORY_FIELDS}
+        store.append(tree, columns, len(result["n_voxels"]), wall_before + time.monotonic() - started)
+        progress.update(store.territories_done)
+    progress.close()
+    return time.monotonic() - grow_started
+
+
+def _report_complete(stream: TextIO, run_id: str, wall: float, cost: dict, statistics: dict) -> None:
+    """The closing line: wall time, the whole tree's C_v + C_w and its annealed part's, coverage, cavities."""
     vascular = cost["volume"] + cost["power"]
     annealed = cost["annealed_volume"] + cost["annealed_power"]
     stream.write(
-        f"vasc_pipeline: extend {source.run_id}: complete in {_duration(wall)}: C_v + C_w {vascular:.6g} W "
+        f"vasc_pipeline: extend {run_id}: complete in {_duration(wall)}: C_v + C_w {vascular:.6g} W "
         f"(annealed part {annealed:.6g} W), coverage {100 * statistics['coverage']:.2f} % within 2 R_fine, "
         f"{statistics['cavity_segments']} fine segments in a cavity\n"
     )
     stream.flush()
+
+
+def _outcome(source, status: str, resumed_from, out_path: Path, plan, wall: float, cost, statistics) -> dict[str, Any]:
+    """What :func:`extend_run` returns."""
     return {
         "run_id": source.run_id,
-        "status": "complete",
+        "status": status,
         "resumed_from": resumed_from,
         "path": str(out_path),
         "n_terminals": plan.n_fine,

@@ -51,7 +51,6 @@ from ..model.topology import (
     KIND_TERMINAL,
     KIND_TERRITORY_ROOT,
     MIN_SEGMENT_LENGTH,
-    _child_lists,
     _parent_array,
     check_tree_arrays,
     children_of,
@@ -72,6 +71,14 @@ from .ordering import (
     strahler_orders,
 )
 from .reference import compare_with_kassab
+from .statistics import (
+    Asymmetry,
+    _order_range,
+    asymmetry_ratios,
+    asymmetry_statistics,
+    grouped_statistics,
+    order_statistics,
+)
 
 __all__ = [  # the topology, ordering and reference names stay importable from here (public API)
     "KIND_INLET",
@@ -103,221 +110,6 @@ __all__ = [  # the topology, ordering and reference names stay importable from h
 
 
 SCHEMES = ("diameter_defined", "strahler")
-
-
-# --------------------------------------------------------------------------- statistics
-
-
-def grouped_statistics(values, groups, levels):
-    """Mean, SD, SE and count of ``values`` per group.
-
-    Parameters
-    ----------
-    values : float (k,)
-    groups : int (k,)
-        Group label of every value.
-    levels : int (m,)
-        Group labels to report, in this order (labels not in ``groups`` get count 0).
-
-    Returns
-    -------
-    mean, sd, se : float64 (m,)
-        Sample SD (ddof=1); SE = SD / sqrt(count). NaN where undefined (mean for count
-        0, SD and SE for count < 2).
-    count : int64 (m,)
-
-    Examples
-    --------
-    >>> m, sd, se, n = grouped_statistics([1.0, 3.0, 5.0], [1, 1, 2], [1, 2, 3])
-    >>> m.tolist(), n.tolist()
-    ([2.0, 5.0, nan], [2, 1, 0])
-    """
-    values = np.asarray(values, dtype=float)
-    groups = np.asarray(groups, dtype=np.int64)
-    levels = np.asarray(levels, dtype=np.int64)
-    m = levels.size
-    if m == 0:
-        empty = np.zeros(0)
-        return empty, empty.copy(), empty.copy(), np.zeros(0, dtype=np.int64)
-    sorter = np.argsort(levels, kind="stable")
-    pos = np.minimum(np.searchsorted(levels, groups, sorter=sorter), m - 1)
-    idx = sorter[pos]
-    valid = levels[idx] == groups  # values whose group is not reported are dropped
-    idx, vals = idx[valid], values[valid]
-    count = np.bincount(idx, minlength=m)[:m]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.bincount(idx, weights=vals, minlength=m)[:m] / count
-        ss = np.bincount(idx, weights=(vals - mean[idx]) ** 2, minlength=m)[:m]
-        sd = np.where(count >= 2, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
-        se = sd / np.sqrt(count)
-    mean = np.where(count > 0, mean, np.nan)
-    return mean, sd, se, count.astype(np.int64)
-
-
-def _stat_vars(prefix: str, what: str, values, groups, levels, units: str) -> dict:
-    mean, sd, se, count = grouped_statistics(values, groups, levels)
-    return {
-        f"{prefix}_mean": ("order", mean, {"units": units, "long_name": f"mean {what}"}),
-        f"{prefix}_sd": ("order", sd, {"units": units, "long_name": f"standard deviation of {what}"}),
-        f"{prefix}_se": ("order", se, {"units": units, "long_name": f"standard error of mean {what}"}),
-    }, count
-
-
-def _order_range(*arrays) -> np.ndarray:
-    vals = [np.asarray(a, dtype=np.int64) for a in arrays if np.size(a)]
-    if not vals:
-        return np.zeros(0, dtype=np.int64)
-    lo = min(int(v.min()) for v in vals)
-    hi = max(int(v.max()) for v in vals)
-    return np.arange(lo, hi + 1, dtype=np.int64)
-
-
-def _order_coord(levels) -> dict:
-    return {"order": ("order", np.asarray(levels, dtype=np.int64), {"long_name": "vessel order", "units": "1"})}
-
-
-def order_statistics(
-    element_order,
-    element_diameter,
-    element_length,
-    segment_order=None,
-    segment_diameter=None,
-    segment_length=None,
-    orders=None,
-) -> xr.Dataset:
-    """Per-order statistics of element (and segment) diameter and length.
-
-    Parameters
-    ----------
-    element_order : int (n_el,)
-    element_diameter, element_length : float64 (n_el,), metres
-    segment_order : int (n_seg,), optional
-        One entry per segment, inlets excluded (not node-indexed).
-    segment_diameter, segment_length : float64 (n_seg,), metres, optional
-    orders : int (m,), optional
-        Order coordinate; default every integer from the lowest to the highest order.
-
-    Returns
-    -------
-    xarray.Dataset
-        Dim ``order``. ``element_diameter_{mean,sd,se}``, ``element_length_{mean,sd,se}``
-        (m), ``element_count``; with segments also ``segment_diameter_*``,
-        ``segment_length_*``, ``segment_count`` and ``segments_per_element`` (Kassab's
-        S/E ratio). SD is the sample SD (NaN for a single vessel).
-    """
-    levels = (
-        _order_range(element_order, *(() if segment_order is None else (segment_order,)))
-        if orders is None
-        else np.asarray(orders, dtype=np.int64)
-    )
-    data = {}
-    v, count = _stat_vars("element_diameter", "element diameter", element_diameter, element_order, levels, "m")
-    data.update(v)
-    v, _ = _stat_vars("element_length", "element length", element_length, element_order, levels, "m")
-    data.update(v)
-    data["element_count"] = ("order", count, {"units": "1", "long_name": "number of elements"})
-    if segment_order is not None:
-        v, seg_count = _stat_vars("segment_diameter", "segment diameter", segment_diameter, segment_order, levels, "m")
-        data.update(v)
-        v, _ = _stat_vars("segment_length", "segment length", segment_length, segment_order, levels, "m")
-        data.update(v)
-        data["segment_count"] = ("order", seg_count, {"units": "1", "long_name": "number of segments"})
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.where(count > 0, seg_count / np.maximum(count, 1), np.nan)
-        data["segments_per_element"] = ("order", ratio, {"units": "1", "long_name": "segments per element (S/E ratio)"})
-    return xr.Dataset(data, coords=_order_coord(levels))
-
-
-class Asymmetry(NamedTuple):
-    """Daughter-to-parent diameter ratios, one entry per bifurcation (``n_bif``).
-
-    Attributes
-    ----------
-    node : int64 (n_bif,)
-        Bifurcation node (its segment is the parent vessel).
-    order : int64 (n_bif,)
-        Order of the parent segment.
-    small : float64 (n_bif,)
-        D_s / D_p, smaller daughter diameter over parent diameter.
-    large : float64 (n_bif,)
-        D_l / D_p, larger daughter diameter over parent diameter.
-    """
-
-    node: np.ndarray
-    order: np.ndarray
-    small: np.ndarray
-    large: np.ndarray
-
-
-def asymmetry_ratios(parent, radius, kind, orders) -> Asymmetry:
-    """Per bifurcation: D_s/D_p and D_l/D_p with the parent segment's order.
-
-    At a multifurcation (contracted trees) D_s and D_l are the smallest and the largest
-    daughter.
-
-    Parameters
-    ----------
-    parent : int64 (node,)
-    radius : float64 (node,), metres
-    kind : int8 (node,)
-    orders : int (node,)
-        Segment orders (any scheme; the parent segment's order is reported).
-
-    Returns
-    -------
-    Asymmetry
-
-    Examples
-    --------
-    >>> a = asymmetry_ratios([-1, 0, 1, 1], [0, 2.0, 1.0, 1.5], [0, 1, 2, 2], [0, 2, 1, 1])
-    >>> a.small.tolist(), a.large.tolist(), a.order.tolist()
-    ([0.5], [0.75], [2])
-    """
-    parent = _parent_array(parent)
-    radius = np.asarray(radius, dtype=float)
-    orders = np.asarray(orders, dtype=np.int64)
-    start, child = _child_lists(parent)
-    has_children = np.flatnonzero(start[1:] > start[:-1])  # reduceat needs non-empty runs
-    r_min = np.minimum.reduceat(radius[child], start[has_children]) if child.size else np.zeros(0)
-    r_max = np.maximum.reduceat(radius[child], start[has_children]) if child.size else np.zeros(0)
-    branching = np.asarray(kind)[has_children] == KIND_BIFURCATION
-    node = has_children[branching]
-    rp = radius[node]
-    return Asymmetry(node.astype(np.int64), orders[node].copy(), r_min[branching] / rp, r_max[branching] / rp)
-
-
-def asymmetry_statistics(asym: Asymmetry, orders=None) -> xr.Dataset:
-    """Asymmetry ratios grouped by the parent's order.
-
-    Parameters
-    ----------
-    asym : Asymmetry
-        From :func:`asymmetry_ratios`.
-    orders : int (m,), optional
-        Order coordinate; default the range of parent orders.
-
-    Returns
-    -------
-    xarray.Dataset
-        Dim ``order``: ``diameter_ratio_small_{mean,sd,se}``,
-        ``diameter_ratio_large_{mean,sd,se}`` (dimensionless) and ``bifurcation_count``.
-    """
-    levels = _order_range(asym.order) if orders is None else np.asarray(orders, dtype=np.int64)
-    data = {}
-    v, count = _stat_vars(
-        "diameter_ratio_small", "smaller daughter to parent diameter ratio D_s/D_p", asym.small, asym.order, levels, "1"
-    )
-    data.update(v)
-    v, _ = _stat_vars(
-        "diameter_ratio_large", "larger daughter to parent diameter ratio D_l/D_p", asym.large, asym.order, levels, "1"
-    )
-    data.update(v)
-    data["bifurcation_count"] = (
-        "order",
-        count,
-        {"units": "1", "long_name": "number of bifurcations (by parent order)"},
-    )
-    return xr.Dataset(data, coords=_order_coord(levels))
 
 
 # --------------------------------------------------------------------------- assembly
@@ -401,58 +193,12 @@ def morphometry(
     >>> ds.element_count.sel(scheme="strahler").values.tolist(), ds.order.values.tolist()
     ([2, 1], [10, 11])
     """
-    full_parent = _parent_array(parent)
-    check_tree_arrays(full_parent, kind, radius=radius, position=position)
-    position = np.asarray(position, dtype=float)
-    full_kind = np.asarray(kind)
-    full_diameter = np.where(full_parent >= 0, 2.0 * np.asarray(radius, dtype=float), 0.0)
-    full_length = segment_lengths(full_parent, position)
-    bend = _bends(full_parent, full_kind)
-    vessel_length = full_length + np.where(bend != np.arange(bend.size), full_length[bend], 0.0)
-    parent, kept = contract_short_segments(full_parent, position, full_kind, min_segment_length, vessel_length)
-    radius = np.asarray(radius, dtype=float)[kept]
-    kind = full_kind[kept]
-    seg = np.flatnonzero(parent >= 0)
-    diameter = full_diameter[kept]
-    length = _contracted_lengths(parent, kept, position, bend)
-    through = np.flatnonzero(full_kind == KIND_TERRITORY_ROOT)
-    through_child = np.flatnonzero((full_parent >= 0) & (bend != np.arange(bend.size)))
-    dds = diameter_defined_strahler(parent, radius, kind, max_iter=max_iter, tol=tol, reading=reading)
-    raw = {"diameter_defined": dds.orders, "strahler": strahler_orders(parent, kind)}
-    shifted = {k: (shift_orders(v, top, mask=parent >= 0) if top is not None else v) for k, v in raw.items()}
-    levels = _order_range(*(v[seg] for v in shifted.values()))
-    parts = []
-    for scheme in SCHEMES:
-        orders = shifted[scheme]
-        el = elements(parent, orders, diameter, length)
-        stats = order_statistics(
-            el.order, el.diameter, el.length, orders[seg], diameter[seg], length[seg], orders=levels
-        )
-        asym = asymmetry_statistics(asymmetry_ratios(parent, radius, kind, orders), orders=levels)
-        part = xr.merge([stats, asym])
-        part["order_shift"] = (
-            (),
-            int(orders[seg][0] - raw[scheme][seg][0]) if seg.size else 0,
-            {"units": "1", "long_name": "shift added to the raw orders (1 = terminal)"},
-        )
-        part["n_elements"] = ((), int(el.order.size), {"units": "1", "long_name": "number of elements"})
-        node_order = np.zeros(full_parent.size, dtype=np.int64)
-        node_order[kept] = orders
-        node_element = np.full(full_parent.size, -1, dtype=np.int64)
-        node_element[kept] = el.segment_element
-        node_order[full_parent[through_child]] = node_order[through_child]  # the segment it continues in
-        node_element[full_parent[through_child]] = node_element[through_child]
-        part["segment_order"] = (
-            "node",
-            node_order,
-            {"units": "1", "long_name": "order of the segment ending at the node"},
-        )
-        part["element_id"] = (
-            "node",
-            node_element,
-            {"units": "1", "long_name": "element of the segment ending at the node"},
-        )
-        parts.append(part)
+    tree = _contracted(parent, position, radius, kind, min_segment_length)
+    dds = diameter_defined_strahler(tree.parent, tree.radius, tree.kind, max_iter=max_iter, tol=tol, reading=reading)
+    raw = {"diameter_defined": dds.orders, "strahler": strahler_orders(tree.parent, tree.kind)}
+    shifted = {k: (shift_orders(v, top, mask=tree.parent >= 0) if top is not None else v) for k, v in raw.items()}
+    levels = _order_range(*(v[tree.seg] for v in shifted.values()))
+    parts = [_scheme_part(tree, shifted[scheme], raw[scheme], levels) for scheme in SCHEMES]
     ds = xr.concat(
         parts,
         dim=xr.DataArray(list(SCHEMES), dims="scheme", name="scheme"),
@@ -465,21 +211,107 @@ def morphometry(
     ds["order"].attrs.update(
         long_name="vessel order" + (f" (shifted: highest = {top})" if top is not None else ""), units="1"
     )
-    ds["segment_diameter"] = ("node", full_diameter, {"units": "m", "long_name": "segment diameter"})
-    ds["segment_length"] = ("node", full_length, {"units": "m", "long_name": "segment length"})
-    ds.attrs.update(
+    ds["segment_diameter"] = ("node", tree.full_diameter, {"units": "m", "long_name": "segment diameter"})
+    ds["segment_length"] = ("node", tree.full_length, {"units": "m", "long_name": "segment length"})
+    ds.attrs.update(_attributes(tree, dds, tol, min_segment_length, top, reading))
+    return ds
+
+
+class _Contracted(NamedTuple):
+    """A tree with its short segments contracted and its pass-through nodes joined (:func:`morphometry`).
+
+    ``parent``, ``radius``, ``kind``, ``diameter`` and ``length`` are the kept nodes'
+    (``kept``: their indices in the full tree, ``seg`` those with a segment); ``full_*`` the
+    whole tree's; ``through_child`` the nodes just below a pass-through node.
+    """
+
+    parent: np.ndarray
+    radius: np.ndarray
+    kind: np.ndarray
+    diameter: np.ndarray
+    length: np.ndarray
+    seg: np.ndarray
+    kept: np.ndarray
+    full_parent: np.ndarray
+    full_diameter: np.ndarray
+    full_length: np.ndarray
+    through_child: np.ndarray
+    n_through: int
+
+
+def _contracted(parent, position, radius, kind, min_segment_length: float) -> _Contracted:
+    """Check the tree, join the segments above and below pass-through nodes, contract the short ones."""
+    full_parent = _parent_array(parent)
+    check_tree_arrays(full_parent, kind, radius=radius, position=position)
+    position = np.asarray(position, dtype=float)
+    full_kind = np.asarray(kind)
+    full_diameter = np.where(full_parent >= 0, 2.0 * np.asarray(radius, dtype=float), 0.0)
+    full_length = segment_lengths(full_parent, position)
+    bend = _bends(full_parent, full_kind)
+    vessel_length = full_length + np.where(bend != np.arange(bend.size), full_length[bend], 0.0)
+    contracted, kept = contract_short_segments(full_parent, position, full_kind, min_segment_length, vessel_length)
+    return _Contracted(
+        parent=contracted,
+        radius=np.asarray(radius, dtype=float)[kept],
+        kind=full_kind[kept],
+        diameter=full_diameter[kept],
+        length=_contracted_lengths(contracted, kept, position, bend),
+        seg=np.flatnonzero(contracted >= 0),
+        kept=kept,
+        full_parent=full_parent,
+        full_diameter=full_diameter,
+        full_length=full_length,
+        through_child=np.flatnonzero((full_parent >= 0) & (bend != np.arange(bend.size))),
+        n_through=int(np.count_nonzero(full_kind == KIND_TERRITORY_ROOT)),
+    )
+
+
+def _scheme_part(tree: _Contracted, orders: np.ndarray, raw: np.ndarray, levels: np.ndarray) -> xr.Dataset:
+    """One ordering scheme's part of :func:`morphometry`: statistics per order, its shift, and the
+    order and element of every node's segment (a pass-through node's that of the segment it continues in)."""
+    parent, seg, kept = tree.parent, tree.seg, tree.kept
+    el = elements(parent, orders, tree.diameter, tree.length)
+    stats = order_statistics(
+        el.order, el.diameter, el.length, orders[seg], tree.diameter[seg], tree.length[seg], orders=levels
+    )
+    asym = asymmetry_statistics(asymmetry_ratios(parent, tree.radius, tree.kind, orders), orders=levels)
+    part = xr.merge([stats, asym])
+    part["order_shift"] = (
+        (),
+        int(orders[seg][0] - raw[seg][0]) if seg.size else 0,
+        {"units": "1", "long_name": "shift added to the raw orders (1 = terminal)"},
+    )
+    part["n_elements"] = ((), int(el.order.size), {"units": "1", "long_name": "number of elements"})
+    full_parent, through_child = tree.full_parent, tree.through_child
+    node_order = np.zeros(full_parent.size, dtype=np.int64)
+    node_order[kept] = orders
+    node_element = np.full(full_parent.size, -1, dtype=np.int64)
+    node_element[kept] = el.segment_element
+    node_order[full_parent[through_child]] = node_order[through_child]  # the segment it continues in
+    node_element[full_parent[through_child]] = node_element[through_child]
+    part["segment_order"] = ("node", node_order, {"units": "1", "long_name": "order of the segment ending at the node"})
+    part["element_id"] = (
+        "node",
+        node_element,
+        {"units": "1", "long_name": "element of the segment ending at the node"},
+    )
+    return part
+
+
+def _attributes(tree: _Contracted, dds, tol: float, min_segment_length: float, top, reading: str) -> dict:
+    """The morphometry's attributes: the diameter-defined passes, the tree's counts, the settings."""
+    return dict(
         dds_iterations=int(dds.n_iter),
         dds_converged=int(bool(dds.converged)),
         dds_tol=float(tol),
         dds_changed_fraction=[float(x) for x in dds.changed],
-        n_inlets=int((kind == KIND_INLET).sum()),
-        n_terminals=int((kind == KIND_TERMINAL).sum()),
-        n_segments=int(seg.size),
-        n_contracted_segments=int(full_parent.size - kept.size - through.size),
-        n_pass_through=int(through.size),
+        n_inlets=int((tree.kind == KIND_INLET).sum()),
+        n_terminals=int((tree.kind == KIND_TERMINAL).sum()),
+        n_segments=int(tree.seg.size),
+        n_contracted_segments=int(tree.full_parent.size - tree.kept.size - tree.n_through),
+        n_pass_through=int(tree.n_through),
         min_segment_length=float(min_segment_length),
         top_order=-1 if top is None else int(top),
         ordering=f"diameter_defined: Jiang, Kassab & Fung 1994 {reading} reassignment "
         "(vasc_pipeline.reduce.morphometry); strahler: conventional Strahler",
     )
-    return ds

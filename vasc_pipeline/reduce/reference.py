@@ -197,6 +197,38 @@ def compare_with_kassab(
     """
     if reference is None:
         reference = kassab_dataset()
+    ds = _checked_selection(ds, reference, artery, scheme, level)
+    table = _joined_orders(ds, reference.sel(artery=artery, level=level), level)
+    both = (table.model_count > 0) & (table.kassab_count > 0)
+    mad = float(table.diameter_log10_ratio[both].abs().mean()) if both.any() else float("nan")
+    mal = float(table.length_log10_ratio[both].abs().mean()) if both.any() else float("nan")
+    table.attrs.update(
+        mean_abs_log10_ratio_diameter=mad,
+        mean_abs_log10_ratio_length=mal,
+        mean_abs_log10_ratio=(mad + mal) / 2,
+        n_orders_compared=int(both.sum()),
+        artery=artery,
+        scheme=scheme,
+        level=level,
+    )
+    return table
+
+
+# The comparison table's columns, in order
+_COMPARISON_COLUMNS = [
+    "model_diameter",
+    "kassab_diameter",
+    "diameter_log10_ratio",
+    "model_length",
+    "kassab_length",
+    "length_log10_ratio",
+    "model_count",
+    "kassab_count",
+]
+
+
+def _checked_selection(ds: xr.Dataset, reference: xr.Dataset, artery: str, scheme: str, level: str) -> xr.Dataset:
+    """``ds`` at ``scheme`` (when it has the dim), after checking the artery, the level and the scheme."""
     if artery not in reference.artery.values:
         raise ValueError(f"artery: {artery!r} is not one of {list(reference.artery.values)}")
     if level not in ("element", "segment"):
@@ -205,7 +237,11 @@ def compare_with_kassab(
         if scheme not in ds.scheme.values:
             raise ValueError(f"scheme: {scheme!r} is not one of {list(ds.scheme.values)}")
         ds = ds.sel(scheme=scheme)
-    ref = reference.sel(artery=artery, level=level)
+    return ds
+
+
+def _joined_orders(ds: xr.Dataset, ref: xr.Dataset, level: str) -> pd.DataFrame:
+    """Model and Kassab per order (the union of the orders either has), with the log10 ratios."""
     model = pd.DataFrame(
         {
             "model_diameter": ds[f"{level}_diameter_mean"].to_series(),
@@ -230,28 +266,4 @@ def compare_with_kassab(
     with np.errstate(divide="ignore", invalid="ignore"):
         table["diameter_log10_ratio"] = np.log10(table.model_diameter / table.kassab_diameter)
         table["length_log10_ratio"] = np.log10(table.model_length / table.kassab_length)
-    table = table[
-        [
-            "model_diameter",
-            "kassab_diameter",
-            "diameter_log10_ratio",
-            "model_length",
-            "kassab_length",
-            "length_log10_ratio",
-            "model_count",
-            "kassab_count",
-        ]
-    ]
-    both = (table.model_count > 0) & (table.kassab_count > 0)
-    mad = float(table.diameter_log10_ratio[both].abs().mean()) if both.any() else float("nan")
-    mal = float(table.length_log10_ratio[both].abs().mean()) if both.any() else float("nan")
-    table.attrs.update(
-        mean_abs_log10_ratio_diameter=mad,
-        mean_abs_log10_ratio_length=mal,
-        mean_abs_log10_ratio=(mad + mal) / 2,
-        n_orders_compared=int(both.sum()),
-        artery=artery,
-        scheme=scheme,
-        level=level,
-    )
-    return table
+    return table[_COMPARISON_COLUMNS]

@@ -330,33 +330,11 @@ def reduce(
     runs, skipped = find_runs(out, damaged)
     sweep = sweep_in_progress(out)  # a sweep holding the output_dir: its unfinished runs are left out
     if not runs:
-        why = "".join(f"\n  left out: {why if path in damaged else f'{path}: {why}'}" for path, why in skipped.items())
-        raise ReductionError(
-            f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; "
-            + (
-                f"a sweep is running in this output_dir ({sweep}) and none of its runs is complete yet: wait for "
-                "it (it reduces the output_dir itself once its runs are complete)"
-                if sweep
-                else "run the sweep first (python -m vasc_pipeline +sweep=NAME output_dir=...)"
-            )
-            + why
-        )
+        raise _nothing_to_reduce(out, skipped, damaged, sweep)
     check_one_configuration(out, runs)
     summary, best, dims = build_summary(runs, output_dir=out)
     summary_path = write_summary(summary, out / SUMMARY_NAME)
-    frame = csv = csv_summary = None
-    if "comparison" in summary.children:
-        frame = comparison_frame(summary)
-        csv = _write_csv(frame, out / COMPARISON_CSV)
-        csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
-        stream.write(format_comparison(summary) + "\n")
-    else:
-        for stale in (out / COMPARISON_CSV, out / COMPARISON_SUMMARY_CSV):  # an earlier reduction's, not of these runs
-            stale.unlink(missing_ok=True)
-        stream.write(
-            "No comparison with Kassab et al. 1993 (pig coronary arteries): tissue.organ is other (set so, or a "
-            "mask with one inlet); tissue.organ=heart compares the trees with them.\n"
-        )
+    frame, csv, csv_summary = _write_comparison(summary, out, stream)
     csv_anatomy = _write_csv(anatomy_frame(summary), out / ANATOMY_CSV)
     stream.write(format_anatomy(summary) + "\n")
     result = Reduction(
@@ -364,25 +342,84 @@ def reduce(
     )
     result.removed = remove_superseded_outputs(out, best)
     if exports:
-        from . import zerod
-        from .export import export_run
-
+        _export_best(result, out)
+    stream.write("\n".join(_report(result, len(runs), sweep)) + "\n")
+    stream.flush()
+    if (out / EXTENDED_DIR).is_dir():  # the whole trees: reduce_extended says which it leaves out
         try:
-            for r in best.values():
-                vtp, table, network = export_run(r.path, out / TREES_DIR)
-                result.trees.extend((vtp, table, network))
-                deviation = zerod.solver_check(json.loads(network.read_text()), r.physics["pressure_inlet"])
-                if deviation is not None:
-                    result.zero_d_check[r.run_id] = deviation
-        except Exception as exc:  # an export problem must not hide the summary already written
-            result.errors["exports"] = f"{type(exc).__name__}: {exc}"
+            result.extended = reduce_extended(out, zerod=extended_zerod, exports=exports, stream=stream)
+            result.errors.update({f"extended {k}": v for k, v in result.extended.errors.items()})
+        except Exception as exc:  # the runs' summary is written and valid: report, go on
+            result.errors["extended"] = f"{type(exc).__name__}: {exc}"
+            stream.write(f"  the whole trees' reduction FAILED: {result.errors['extended']}\n")
+    return result
+
+
+def _left_out(path: str, why: str, damaged: dict[str, str]) -> str:
+    """A store left out, as the report says it (a damaged store's message names its path)."""
+    return why if path in damaged else f"{path}: {why}"
+
+
+def _nothing_to_reduce(out: Path, skipped: dict, damaged: dict, sweep) -> ReductionError:
+    """The error of an output_dir with no complete run: what to do, and every store left out."""
+    why = "".join(f"\n  left out: {_left_out(path, why, damaged)}" for path, why in skipped.items())
+    return ReductionError(
+        f"output_dir {str(out)!r}: no complete run under {str(out / RUNS_DIR)!r}; "
+        + (
+            f"a sweep is running in this output_dir ({sweep}) and none of its runs is complete yet: wait for "
+            "it (it reduces the output_dir itself once its runs are complete)"
+            if sweep
+            else "run the sweep first (python -m vasc_pipeline +sweep=NAME output_dir=...)"
+        )
+        + why
+    )
+
+
+def _write_comparison(summary: xr.DataTree, out: Path, stream: TextIO) -> tuple:
+    """A heart's comparison with Kassab: (frame, CSV, summary CSV), printed; else (None, None, None)
+    and an earlier reduction's comparison files removed."""
+    if "comparison" not in summary.children:
+        for stale in (out / COMPARISON_CSV, out / COMPARISON_SUMMARY_CSV):  # an earlier reduction's, not of these runs
+            stale.unlink(missing_ok=True)
+        stream.write(
+            "No comparison with Kassab et al. 1993 (pig coronary arteries): tissue.organ is other (set so, or a "
+            "mask with one inlet); tissue.organ=heart compares the trees with them.\n"
+        )
+        return None, None, None
+    frame = comparison_frame(summary)
+    csv = _write_csv(frame, out / COMPARISON_CSV)
+    csv_summary = _write_csv(_comparison_summary_frame(summary), out / COMPARISON_SUMMARY_CSV)
+    stream.write(format_comparison(summary) + "\n")
+    return frame, csv, csv_summary
+
+
+def _export_best(result: Reduction, out: Path) -> None:
+    """The best tree of every cell as .vtp, .csv and .0d.json, its 0D network checked (into ``result``).
+    An export problem is recorded in ``result.errors``: it must not hide the summary already written."""
+    from . import zerod
+    from .export import export_run
+
+    try:
+        for r in result.best.values():
+            vtp, table, network = export_run(r.path, out / TREES_DIR)
+            result.trees.extend((vtp, table, network))
+            deviation = zerod.solver_check(json.loads(network.read_text()), r.physics["pressure_inlet"])
+            if deviation is not None:
+                result.zero_d_check[r.run_id] = deviation
+    except Exception as exc:
+        result.errors["exports"] = f"{type(exc).__name__}: {exc}"
+
+
+def _report(result: Reduction, n_runs: int, sweep) -> list[str]:
+    """The lines printed after a reduction: what was written, what was left out, what failed."""
+    out, skipped = result.output_dir, result.skipped
     lines = [
-        f"vasc_pipeline: reduced {len(runs)} complete runs in {len(best)} cells ({len(skipped)} stores left out)",
-        f"  summary: {summary_path} (xarray.open_datatree(path, engine='zarr'))",
+        f"vasc_pipeline: reduced {n_runs} complete runs in {len(result.best)} cells ({len(skipped)} stores left out)",
+        f"  summary: {result.summary_path} (xarray.open_datatree(path, engine='zarr'))",
     ]
-    if csv is not None:
-        lines.append(f"  comparison: {csv}, {csv_summary}")
-    lines.append(f"  anatomy: {csv_anatomy}")
+    if result.comparison_csv is not None:
+        lines.append(f"  comparison: {result.comparison_csv}, {result.comparison_summary_csv}")
+    lines.append(f"  anatomy: {result.anatomy_csv}")
     if result.trees:
         lines.append(
             f"  trees: {out / 'trees'} ({len(result.trees)} files: .vtp for ParaView, .csv, .0d.json for svZeroDSolver)"
@@ -396,7 +433,7 @@ def reduce(
     if result.removed:
         lines.append(f"  removed {len(result.removed)} exports and figures of trees no longer their cell's best")
     for path, why in skipped.items():
-        lines.append(f"  left out: {why if path in damaged else f'{path}: {why}'}")
+        lines.append(f"  left out: {_left_out(path, why, result.damaged)}")
     if sweep:
         lines.append(
             f"  a sweep is running in this output_dir ({sweep}): its unfinished runs are left out; it reduces "
@@ -404,13 +441,4 @@ def reduce(
         )
     for stage, error in result.errors.items():
         lines.append(f"  {stage} FAILED: {error}")
-    stream.write("\n".join(lines) + "\n")
-    stream.flush()
-    if (out / EXTENDED_DIR).is_dir():  # the whole trees: reduce_extended says which it leaves out
-        try:
-            result.extended = reduce_extended(out, zerod=extended_zerod, exports=exports, stream=stream)
-            result.errors.update({f"extended {k}": v for k, v in result.extended.errors.items()})
-        except Exception as exc:  # the runs' summary is written and valid: report, go on
-            result.errors["extended"] = f"{type(exc).__name__}: {exc}"
-            stream.write(f"  the whole trees' reduction FAILED: {result.errors['extended']}\n")
-    return result
+    return lines

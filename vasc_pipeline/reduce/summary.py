@@ -49,94 +49,16 @@ import psutil
 import xarray as xr
 
 from ..store.run_store import RunStore, file_lock
-from ..store.trace import TRACE_META, TRACE_NAMES
 from . import morphometry as _m
-from .anatomy import ANATOMY_FIELDS, HUO_KASSAB_EXPONENTS, anatomy_of_store
+from .cell_grid import CELL_META, COST_META, cell_dims, cell_var, stack_cells, strings_as_objects, with_steps
 from .reference import ARTERIES, kassab_dataset
-from .runs import COST_KEYS, ReductionError, RunInfo, as_float, best_runs
+from .runs import ReductionError, RunInfo, as_float, best_runs
+from .seed_groups import anatomy_group, cost_group, trace_group
 from .similarity import main_trunks, tortuosity, trunk_spread
 
 __all__ = ["build_summary", "write_summary", "COMPARISON_SCHEME", "COMPARISON_LEVEL"]
 
 COMPARISON_SCHEME, COMPARISON_LEVEL = "diameter_defined", "element"
-_COST_META = {
-    "total": TRACE_META["total"],
-    "volume": TRACE_META["volume"],
-    "power": TRACE_META["power"],
-    "supply": TRACE_META["supply"],
-    "exclusion": TRACE_META["exclusion"],
-    "pressure": TRACE_META["pressure"],
-}
-_CELL_META = {
-    "tissue": {"long_name": "tissue"},
-    "method": {"long_name": "how the tree was grown (anneal, cco)"},
-    "n_terminals": {"long_name": "number of terminal nodes N", "units": "1"},
-    "m_b": {"long_name": "metabolic cost of blood m_b", "units": "W m-3"},
-    "steps": {"long_name": "proposed moves per run", "units": "1"},
-    "seed": {"long_name": "random seed", "units": "1"},
-}
-
-
-def _cell_dims(runs: list[RunInfo]) -> list[str]:
-    dims = ["n_terminals", "m_b"]
-    if any(r.steps is not None for r in runs):
-        dims.append("steps")
-    if len({r.tissue for r in runs}) > 1:
-        dims.insert(0, "tissue")
-    if len({r.method for r in runs}) > 1:  # anneal and CCO runs side by side
-        dims.insert(0, "method")
-    return dims
-
-
-def _with_steps(runs: list[RunInfo], dims: list[str]) -> list[RunInfo]:
-    """Runs without a steps coordinate get their own step count when others have one."""
-    if "steps" not in dims:
-        return runs
-    for r in runs:
-        if r.steps is None:
-            r.steps = r.steps_done
-    return runs
-
-
-def _fill_for(dtype: np.dtype):
-    if np.issubdtype(dtype, np.floating):
-        return np.nan
-    if np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.bool_):
-        return 0
-    return ""
-
-
-def _stack(parts: dict[tuple, xr.Dataset], dims: list[str], coords: dict[str, list]) -> xr.Dataset:
-    """Place per-cell datasets (identical inner shapes) on the grid ``dims``; absent cells get fillers.
-
-    Fillers: NaN (floats), 0 (integers, counts), "" (strings).
-    """
-    first = next(iter(parts.values()))
-    index = {d: {v: i for i, v in enumerate(coords[d])} for d in dims}
-    grid_shape = [len(coords[d]) for d in dims]
-    out = {}
-    for name, var in first.data_vars.items():
-        dtype = var.dtype if var.dtype.kind in "fiub" else object
-        arr = np.full(grid_shape + list(var.shape), _fill_for(np.dtype(dtype)), dtype=dtype)
-        for key, ds in parts.items():
-            value = ds[name].values
-            # a 0-d object array would be stored as an element itself: take its item
-            arr[tuple(index[d][k] for d, k in zip(dims, key))] = value[()] if value.ndim == 0 else value
-        out[name] = (dims + list(var.dims), arr, dict(var.attrs))
-    inner = {k: v for k, v in first.coords.items() if set(v.dims) <= set(first.dims)}
-    ds = xr.Dataset(out, coords={**{d: (d, _coord_values(coords[d]), _CELL_META[d]) for d in dims}, **inner})
-    return ds
-
-
-def _coord_values(values: list) -> np.ndarray:
-    if values and isinstance(values[0], str):
-        return np.array(values, dtype=object)
-    return np.asarray(values)
-
-
-def _cell_var(best: dict[tuple, RunInfo], getter, dtype, units: str | None, long_name: str):
-    attrs = {"long_name": long_name, **({"units": units} if units else {})}
-    return {k: xr.DataArray(np.asarray(getter(r), dtype=dtype), attrs=attrs) for k, r in best.items()}
 
 
 def _morphometry_of(run: RunInfo) -> xr.Dataset:
@@ -223,8 +145,8 @@ def build_summary(
     """
     if not runs:
         raise ReductionError("no complete run to reduce")
-    dims = _cell_dims(runs)
-    runs = _with_steps(runs, dims)
+    dims = cell_dims(runs)
+    runs = with_steps(runs, dims)
     best = best_runs(runs, dims)
     cell_coords = {d: sorted({getattr(r, d) for r in runs}) for d in dims}
     morph = {key: _morphometry_of(r) for key, r in best.items()}
@@ -235,9 +157,46 @@ def build_summary(
     lo = min([int(ds.order.min()) for ds in morph.values()] + ([int(reference.order.min())] if heart else []))
     orders = np.arange(lo, _m.TOP_ORDER + 1, dtype=np.int64)
 
+    morph_parts, asym_parts, comp_parts = _cell_parts(morph, orders, reference)
+    for name, values in _cell_extras(runs, best, dims).items():
+        for key in best:
+            morph_parts[key][name] = values[key]
+    for key, r in best.items():
+        gamma = as_float(r.physics.get("gamma"))
+        asym_parts[key]["symmetric_ratio"] = xr.DataArray(
+            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
+        )
+
+    morphometry = stack_cells(morph_parts, dims, cell_coords)
+    morphometry.attrs.update(
+        title="Order-wise morphometry of the lowest-cost tree of every cell",
+        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
+        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
+    )
+    asymmetry = stack_cells(asym_parts, dims, cell_coords)
+    asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
+    groups = {
+        "/": _root(runs, best, dims, output_dir, heart),
+        "/morphometry": morphometry,
+        "/asymmetry": asymmetry,
+        "/costs": cost_group(runs, best, dims, cell_coords),
+        "/anatomy": anatomy_group(runs, dims, cell_coords),
+        "/traces": trace_group(runs, dims, cell_coords),
+    }
+    if heart:
+        groups["/kassab"] = strings_as_objects(reference)
+        groups["/comparison"] = _comparison_group(comp_parts, dims, cell_coords)
+    _scalar_cell_coords(groups, dims, runs)
+    for ds in groups.values():
+        strings_as_objects(ds, inplace=True)
+    return xr.DataTree.from_dict(groups), best, dims
+
+
+def _cell_parts(morph: dict, orders: np.ndarray, reference: xr.Dataset | None) -> tuple[dict, dict, dict]:
+    """Per cell, its best tree's morphometry on the common ``orders`` split into the ``/morphometry``
+    and ``/asymmetry`` parts, and (a heart's, with ``reference``) its comparison with Kassab."""
     morph_parts, asym_parts, comp_parts = {}, {}, {}
     for key, ds in morph.items():
-        r = best[key]
         ds = ds.drop_dims("node").reindex(order=orders)
         for name, var in ds.data_vars.items():  # reindex turns absent counts into NaN: back to 0
             if name.endswith("_count"):
@@ -255,18 +214,23 @@ def build_summary(
         ds.attrs = {}
         asym_parts[key] = ds[list(_ASYMMETRY_VARS)]
         morph_parts[key] = ds.drop_vars(list(_ASYMMETRY_VARS))
-        if heart:
+        if reference is not None:
             comp_parts[key], _ = _comparison_part(ds, reference, orders)
+    return morph_parts, asym_parts, comp_parts
+
+
+def _cell_extras(runs: list[RunInfo], best: dict, dims: list[str]) -> dict[str, dict]:
+    """The per-cell scalars of ``/morphometry``: the best run, the seeds, the trunks' spread and tortuosity."""
     n_seeds = {k: sum(1 for r in runs if r.cell(dims) == k) for k in best}
     trunks = {r.path: _main_trunks_of(r) for r in runs}  # read once: the spread and the tortuosity use them
-    extra = {
-        "best_seed": _cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
-        "best_run_id": _cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
-        "best_cost": _cell_var(
+    return {
+        "best_seed": cell_var(best, lambda r: r.seed, np.int64, "1", "seed of the lowest-cost run of the cell"),
+        "best_run_id": cell_var(best, lambda r: r.run_id, object, None, "run id of the lowest-cost run of the cell"),
+        "best_cost": cell_var(
             best,
             lambda r: r.cost["total"],
             np.float64,
-            _COST_META["total"][0],
+            COST_META["total"][0],
             "final annealed total cost C of the lowest-cost run",
         ),
         "n_seeds": {
@@ -284,7 +248,7 @@ def build_summary(
             )
             for k in best
         },
-        "trunk_tortuosity": _cell_var(
+        "trunk_tortuosity": cell_var(
             best,
             lambda r: np.mean([tortuosity(t) for t in trunks[r.path]]),
             np.float64,
@@ -292,29 +256,11 @@ def build_summary(
             "main trunk arc length over chord, mean over inlets, of the best tree (1: straight)",
         ),
     }
-    for name, values in extra.items():
-        for key in best:
-            morph_parts[key][name] = values[key]
-    for key, r in best.items():
-        gamma = as_float(r.physics.get("gamma"))
-        asym_parts[key]["symmetric_ratio"] = xr.DataArray(
-            2.0 ** (-1.0 / gamma), attrs={"units": "1", "long_name": "D_d/D_p at a symmetric bifurcation, 2^(-1/gamma)"}
-        )
 
-    morphometry = _stack(morph_parts, dims, cell_coords)
-    morphometry.attrs.update(
-        title="Order-wise morphometry of the lowest-cost tree of every cell",
-        ordering="diameter_defined: Jiang, Kassab & Fung 1994 range reassignment; strahler: conventional. "
-        f"Orders shifted so that the highest is {_m.TOP_ORDER} (Kassab's coronary trunk).",
-    )
-    asymmetry = _stack(asym_parts, dims, cell_coords)
-    asymmetry.attrs.update(title="Daughter to parent diameter ratios by parent order (lowest-cost tree per cell)")
-    costs = _costs(runs, best, dims, cell_coords)
-    anatomy = _anatomy(runs, dims, cell_coords)
-    traces = _traces(runs, dims, cell_coords)
 
-    tissues = sorted({r.tissue for r in runs})
-    root = xr.Dataset(
+def _root(runs: list[RunInfo], best: dict, dims: list[str], output_dir, heart: bool) -> xr.Dataset:
+    """The root group: what the summary is of (its attributes only)."""
+    return xr.Dataset(
         attrs={
             "title": "vasc_pipeline sweep summary",
             "Conventions": "CF-1.10",
@@ -323,39 +269,30 @@ def build_summary(
             "cell_dims": list(dims),
             "n_runs": len(runs),
             "n_cells": len(best),
-            "tissues": tissues,
+            "tissues": sorted({r.tissue for r in runs}),
             "comparison_scheme": COMPARISON_SCHEME,
             "comparison_level": COMPARISON_LEVEL,
             "organ": "heart" if heart else "other",
         }
     )
-    groups = {
-        "/": root,
-        "/morphometry": morphometry,
-        "/asymmetry": asymmetry,
-        "/costs": costs,
-        "/anatomy": anatomy,
-        "/traces": traces,
-    }
-    if heart:
-        groups["/kassab"] = _strings_as_objects(reference)
-        groups["/comparison"] = _comparison_group(comp_parts, dims, cell_coords)
+
+
+def _scalar_cell_coords(groups: dict, dims: list[str], runs: list[RunInfo]) -> None:
+    """One tissue or one method in the whole sweep: a scalar coordinate on every cell group (in place)."""
     cell_groups = [name for name in groups if name not in ("/", "/kassab")]
-    if "tissue" not in dims:  # one tissue: a scalar coordinate on the cell groups
+    if "tissue" not in dims:
+        tissue = sorted({r.tissue for r in runs})[0]
         for name in cell_groups:
-            groups[name] = groups[name].assign_coords(tissue=((), tissues[0], _CELL_META["tissue"]))
-    if "method" not in dims:  # one method: likewise
+            groups[name] = groups[name].assign_coords(tissue=((), tissue, CELL_META["tissue"]))
+    if "method" not in dims:
         method = runs[0].method
         for name in cell_groups:
-            groups[name] = groups[name].assign_coords(method=((), method, _CELL_META["method"]))
-    for ds in groups.values():
-        _strings_as_objects(ds, inplace=True)
-    return xr.DataTree.from_dict(groups), best, dims
+            groups[name] = groups[name].assign_coords(method=((), method, CELL_META["method"]))
 
 
 def _comparison_group(comp_parts: dict, dims: list[str], cell_coords: dict) -> xr.Dataset:
     """The ``/comparison`` group from the cells' :func:`_comparison_part` datasets."""
-    comparison = _stack(comp_parts, dims, cell_coords)
+    comparison = stack_cells(comp_parts, dims, cell_coords)
     comparison = comparison.assign_coords(
         artery=("artery", np.array(ARTERIES, dtype=object), {"long_name": "coronary artery (Kassab 1993)"})
     )
@@ -366,130 +303,6 @@ def _comparison_group(comp_parts: dict, dims: list[str], cell_coords: dict) -> x
         level=COMPARISON_LEVEL,
     )
     return comparison
-
-
-def _strings_as_objects(ds: xr.Dataset, inplace: bool = False) -> xr.Dataset:
-    """Fixed-width unicode -> object arrays: Zarr v3 stores those as its spec'd ``string`` type."""
-    if not inplace:
-        ds = ds.copy()
-    for name in list(ds.variables):
-        var = ds.variables[name]
-        if var.dtype.kind == "U":
-            if name in ds.coords:
-                ds.coords[name] = var.copy(data=var.values.astype(object))
-            else:
-                ds[name] = var.copy(data=var.values.astype(object))
-    return ds
-
-
-def _seed_grid(runs, dims, cell_coords) -> tuple[list[int], dict, dict]:
-    """The (cell..., seed) grid of every run: its shape, each run's index in it (by path) and its coordinates."""
-    seeds = sorted({r.seed for r in runs})
-    index = {d: {v: i for i, v in enumerate(cell_coords[d])} for d in dims}
-    at = {r.path: tuple(index[d][v] for d, v in zip(dims, r.cell(dims))) + (seeds.index(r.seed),) for r in runs}
-    coords = {d: (d, _coord_values(cell_coords[d]), _CELL_META[d]) for d in dims}
-    coords["seed"] = ("seed", np.asarray(seeds, dtype=np.int64), _CELL_META["seed"])
-    return [len(cell_coords[d]) for d in dims] + [len(seeds)], at, coords
-
-
-def _costs(runs, best, dims, cell_coords) -> xr.Dataset:
-    shape, where, coords = _seed_grid(runs, dims, cell_coords)
-    values = {k: np.full(shape, np.nan) for k in COST_KEYS}
-    steps_done = np.zeros(shape, dtype=np.int64)
-    wall = np.full(shape, np.nan)
-    run_id = np.full(shape, "", dtype=object)
-    is_best = np.zeros(shape, dtype=np.int8)
-    cavity = np.full(shape, np.nan)
-    for r in runs:
-        at = where[r.path]
-        for k in COST_KEYS:
-            values[k][at] = r.cost[k]
-        cavity[at] = r.statistics.get("cavity_share", np.nan)
-        steps_done[at], wall[at], run_id[at] = r.steps_done, r.wall_seconds, r.run_id
-        is_best[at] = best[r.cell(dims)] is r
-    full = dims + ["seed"]
-    data = {
-        f"cost_{k}": (
-            full,
-            values[k],
-            {
-                "units": _COST_META[k][0],
-                "long_name": "final " + _COST_META[k][1] + ("" if k == "total" else " (unscaled)"),
-            },
-        )
-        for k in COST_KEYS
-    }
-    data["steps_done"] = (full, steps_done, {"units": "1", "long_name": "proposed moves done (0: no run)"})
-    data["wall_seconds"] = (full, wall, {"units": "s", "long_name": "wall-clock time of the run, all sessions"})
-    data["run_id"] = (full, run_id, {"long_name": "run id (empty: no complete run)"})
-    data["is_best"] = (full, is_best, {"units": "1", "long_name": "1 for the lowest-cost run of the cell"})
-    data["cavity_share"] = (
-        full,
-        cavity,
-        {
-            "units": "1",
-            "long_name": "share of the large vessels' length (r >= r_max/4) inside the tissue's cavities "
-            "(NaN: no cavity, e.g. not the heart)",
-        },
-    )
-    return xr.Dataset(data, coords=coords, attrs={"title": "Final costs of every complete run"})
-
-
-def _anatomy(runs, dims, cell_coords) -> xr.Dataset:
-    """Every complete run's :func:`~vasc_pipeline.reduce.anatomy.anatomy`, on (cell..., seed) and,
-    for the inlet shares, (cell..., seed, inlet)."""
-    shape, where, coords = _seed_grid(runs, dims, cell_coords)
-    found = {r.path: anatomy_of_store(r.path) for r in runs}
-    prefix = "inlet_share_"
-    inlets = sorted({k[len(prefix) :] for a in found.values() for k in a if k.startswith(prefix)})
-    values = {name: np.full(shape, np.nan) for name, _, _ in ANATOMY_FIELDS}
-    shares = np.full(shape + [len(inlets)], np.nan)
-    for r in runs:
-        at = where[r.path]
-        for name in values:
-            values[name][at] = found[r.path][name]
-        for j, inlet in enumerate(inlets):
-            shares[at + (j,)] = found[r.path].get(prefix + inlet, np.nan)
-    full = dims + ["seed"]
-    data = {name: (full, values[name], {"units": u, "long_name": ln}) for name, u, ln in ANATOMY_FIELDS}
-    share_attrs = {"units": "1", "long_name": "share of the terminals fed by the inlet"}
-    data["inlet_share"] = (full + ["inlet"], shares, share_attrs)
-    coords["inlet"] = ("inlet", np.array(inlets, dtype=object), {"long_name": "inlet (ostium) name"})
-    return xr.Dataset(
-        data,
-        coords=coords,
-        attrs={
-            "title": "Anatomy of every complete run: arteries, vessels on the organ, pressures, crown scaling",
-            **{f"huo_kassab_{k}": v for k, v in HUO_KASSAB_EXPONENTS.items()},
-        },
-    )
-
-
-def _traces(runs, dims, cell_coords) -> xr.Dataset:
-    grid, where, coords = _seed_grid(runs, dims, cell_coords)
-    traces = {r.run_id: RunStore.open(r.path, mode="r").read_trace() for r in runs}
-    n_rec = max((len(t["step"]) for t in traces.values()), default=0)
-    shape = grid + [n_rec]
-    names = TRACE_NAMES
-    # step as float64 with NaN padding: exact for step counts below 2^53, and plots need no mask
-    arrays = {n: np.full(shape, np.nan) for n in names}
-    length = np.zeros(shape[:-1], dtype=np.int64)
-    for r in runs:
-        t = traces[r.run_id]
-        at = where[r.path]
-        k = len(t["step"])
-        length[at] = k
-        for n in names:
-            arrays[n][at + (slice(0, k),)] = t[n]
-    full = dims + ["seed", "record"]
-    data = {n: (full, arrays[n], {"units": TRACE_META[n][0], "long_name": TRACE_META[n][1]}) for n in names}
-    data["trace_length"] = (
-        dims + ["seed"],
-        length,
-        {"units": "1", "long_name": "trace records of the run (0: no run)"},
-    )
-    coords["record"] = ("record", np.arange(n_rec, dtype=np.int64), {"units": "1", "long_name": "trace record"})
-    return xr.Dataset(data, coords=coords, attrs={"title": "Cost traces of every complete run (NaN-padded)"})
 
 
 def write_summary(tree: xr.DataTree, path: str | os.PathLike) -> Path:

@@ -117,62 +117,18 @@ def network(
     parent = np.asarray(parent, dtype=np.int64)
     inlets = np.flatnonzero(parent < 0)
     names = tuple(inlet_names) if inlet_names else tuple(f"inlet{i}" for i in range(inlets.size))
-    inlet_name = dict(zip(inlets.tolist(), names))
-    segments = np.flatnonzero(parent >= 0)
-    vessel_of = np.full(parent.size, -1, dtype=np.int64)
-    vessel_of[segments] = np.arange(segments.size)
-    start, child = _child_lists(parent)
+    n_segments = int(np.count_nonzero(parent >= 0))
     extra = {}
     if lumped is not None:
-        extra = {int(v): segments.size + j for j, v in enumerate(np.asarray(lumped.node).tolist())}
-    steady = [0.0, 1.0]
-    vessels, junctions, conditions = [], [], []
-    parents, lengths, resistances = parent.tolist(), np.asarray(length).tolist(), np.asarray(resistance).tolist()
-    starts, children, vessel_ids = start.tolist(), child.tolist(), vessel_of.tolist()
-    for node in segments.tolist():
-        up = parents[node]
-        vessel = {
-            "vessel_id": vessel_ids[node],
-            "vessel_name": f"branch{vessel_ids[node]}_seg0",
-            "vessel_length": float(lengths[node]),
-            "zero_d_element_type": "BloodVessel",
-            "zero_d_element_values": {"R_poiseuille": float(resistances[node])},
-        }
-        ends = {}
-        if parents[up] < 0:  # the root segment of an inlet
-            name = f"INFLOW_{inlet_name[up]}"
-            q = float(flow[node])
-            conditions.append({"bc_name": name, "bc_type": "FLOW", "bc_values": {"Q": [q, q], "t": steady}})
-            ends["inlet"] = name
-        below = [vessel_ids[c] for c in children[starts[node] : starts[node + 1]]]
-        if node in extra:
-            below = [extra[node]]
-        if not below:  # a terminal
-            name = f"OUT_{node}"
-            p = float(pressure[node])
-            conditions.append({"bc_name": name, "bc_type": "PRESSURE", "bc_values": {"P": [p, p], "t": steady}})
-            ends["outlet"] = name
-        else:
-            junctions.append(
-                {
-                    "junction_name": f"J{node}",
-                    "junction_type": "NORMAL_JUNCTION",
-                    "inlet_vessels": [vessel_ids[node]],
-                    "outlet_vessels": below,
-                }
-            )
-        if ends:
-            vessel["boundary_conditions"] = ends
-        vessels.append(vessel)
+        extra = {int(v): n_segments + j for j, v in enumerate(np.asarray(lumped.node).tolist())}
+    segment_values = (length, resistance, flow, pressure)
+    vessels, junctions, conditions = _segment_elements(parent, segment_values, dict(zip(inlets.tolist(), names)), extra)
     if lumped is not None:
         for j, name in enumerate(lumped.name):
-            p = float(lumped.pressure[j])
-            conditions.append(
-                {"bc_name": f"OUT_{name}", "bc_type": "PRESSURE", "bc_values": {"P": [p, p], "t": steady}}
-            )
+            conditions.append(_steady_condition(f"OUT_{name}", "PRESSURE", "P", float(lumped.pressure[j])))
             vessels.append(
                 {
-                    "vessel_id": segments.size + j,
+                    "vessel_id": n_segments + j,
                     "vessel_name": name,
                     "vessel_length": float(lumped.length[j]),
                     "zero_d_element_type": "BloodVessel",
@@ -190,6 +146,56 @@ def network(
         "junctions": junctions,
         "vessels": vessels,
     }
+
+
+def _steady_condition(name: str, bc_type: str, key: str, value: float) -> dict:
+    """A boundary condition held at ``value`` over the steady run's two time points."""
+    return {"bc_name": name, "bc_type": bc_type, "bc_values": {key: [value, value], "t": [0.0, 1.0]}}
+
+
+def _segment_elements(parent: np.ndarray, segment_values, inlet_name: dict, extra: dict) -> tuple[list, list, list]:
+    """(vessels, junctions, conditions) of the tree's segments in node order (:func:`network`);
+    ``extra`` maps a childless node to the vessel id of the lumped element below it."""
+    length, resistance, flow, pressure = segment_values
+    segments = np.flatnonzero(parent >= 0)
+    vessel_of = np.full(parent.size, -1, dtype=np.int64)
+    vessel_of[segments] = np.arange(segments.size)
+    start, child = _child_lists(parent)
+    vessels, junctions, conditions = [], [], []
+    parents, lengths, resistances = parent.tolist(), np.asarray(length).tolist(), np.asarray(resistance).tolist()
+    starts, children, vessel_ids = start.tolist(), child.tolist(), vessel_of.tolist()
+    for node in segments.tolist():
+        up = parents[node]
+        vessel = {
+            "vessel_id": vessel_ids[node],
+            "vessel_name": f"branch{vessel_ids[node]}_seg0",
+            "vessel_length": float(lengths[node]),
+            "zero_d_element_type": "BloodVessel",
+            "zero_d_element_values": {"R_poiseuille": float(resistances[node])},
+        }
+        ends = {}
+        if parents[up] < 0:  # the root segment of an inlet
+            ends["inlet"] = f"INFLOW_{inlet_name[up]}"
+            conditions.append(_steady_condition(ends["inlet"], "FLOW", "Q", float(flow[node])))
+        below = [vessel_ids[c] for c in children[starts[node] : starts[node + 1]]]
+        if node in extra:
+            below = [extra[node]]
+        if not below:  # a terminal
+            ends["outlet"] = f"OUT_{node}"
+            conditions.append(_steady_condition(ends["outlet"], "PRESSURE", "P", float(pressure[node])))
+        else:
+            junctions.append(
+                {
+                    "junction_name": f"J{node}",
+                    "junction_type": "NORMAL_JUNCTION",
+                    "inlet_vessels": [vessel_ids[node]],
+                    "outlet_vessels": below,
+                }
+            )
+        if ends:
+            vessel["boundary_conditions"] = ends
+        vessels.append(vessel)
+    return vessels, junctions, conditions
 
 
 def steady_solution(model: dict) -> dict[str, np.ndarray]:

@@ -36,7 +36,8 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import zarr
 
-from .run_store import STATUS_COMPLETE, STATUS_RUNNING, GroupStore, StoreError, _jsonable, run_lock
+from .group import GroupStore, StoreError, create_group, jsonable, run_lock
+from .run_store import STATUS_COMPLETE, STATUS_RUNNING
 
 __all__ = ["ExtendedStore", "EXTENDED_FORMAT", "TREE_CHUNK", "extended_lock", "identity_hash"]
 
@@ -60,7 +61,7 @@ TREE_NAMES = tuple(t[0] for t in _TREE)
 
 def identity_hash(config: Mapping[str, Any], source_digest: str) -> str:
     """SHA-256 of what determines an extension's result: its config and its source's digest."""
-    text = json.dumps({"config": _jsonable(config), "source": source_digest}, sort_keys=True, separators=(",", ":"))
+    text = json.dumps({"config": jsonable(config), "source": source_digest}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -102,22 +103,18 @@ class ExtendedStore(GroupStore):
             "format": EXTENDED_FORMAT,
             "run_id": run_id,
             "status": STATUS_RUNNING,
-            "source": _jsonable(source),
-            "config": _jsonable(config),
+            "source": jsonable(source),
+            "config": jsonable(config),
             "identity": identity_hash(config, source["digest"]),
             "n_nodes": int(n_nodes),
             "n_territories": int(n_territories),
             "nodes_committed": 0,
             "territories_done": 0,
-            "physics": _jsonable(physics),
+            "physics": jsonable(physics),
             "wall_seconds": 0.0,
             "sessions": [],
         }
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
-        except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
-            raise StoreError(f"extended store {str(path)!r} already exists") from exc
+        group = create_group(path, attrs, "extended store")
         tree = group.require_group("tree")
         for name, dtype, dims, long_name, units in _TREE:
             tree.create_array(
@@ -164,7 +161,7 @@ class ExtendedStore(GroupStore):
         return int(self.group.attrs["territories_done"])
 
     def _set_attrs(self, **values: Any) -> None:
-        self.group.update_attributes(_jsonable(values))
+        self.group.update_attributes(jsonable(values))
 
     def _arrays(self) -> Iterator[tuple[zarr.Array, int]]:
         """Every appended array with its committed length."""

@@ -34,18 +34,16 @@ root attributes) that makes them valid.
 
 One writer per store: :func:`run_lock` holds an ``fcntl`` lock (:func:`file_lock`, which the
 sweep's output_dir lock uses too) on ``runs/.locks/<run_id>.lock`` while a job writes (a
-worker the scheduler gave up on may still be running).
+worker the scheduler gave up on may still be running). The locks, :class:`StoreError` and the base
+class every store shares are :mod:`vasc_pipeline.store.group`'s (re-exported here).
 """
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
-import math
 import os
 import warnings
 from pathlib import Path
-from typing import IO, Any, Iterator, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 import zarr
@@ -53,6 +51,7 @@ import zarr
 from ..config.identity import SWEEP_AXES, config_differences, config_hash, hashed_config, identity_differences
 from ..config.schema import ConfigError
 from .checkpoints import CHECKPOINTS, Checkpoint, CheckpointsMixin, CheckpointWarning, crc32
+from .group import GroupStore, StoreError, create_group, file_lock, jsonable, run_lock, write_whole_array
 from .layout import RUNS_DIR, run_path
 from .trace import TRACE_FIELDS, TRACE_NAMES
 
@@ -82,10 +81,6 @@ __all__ = [
 STATUS_RUNNING, STATUS_COMPLETE = "running", "complete"
 FORMAT = "vasc_pipeline.run/1"
 TRACE_CHUNK = 4096  # records per trace chunk: a few appends per chunk, small files
-
-
-class StoreError(OSError):
-    """A run store that cannot be read or written; the message names the path."""
 
 
 class StoreDamaged(StoreError):
@@ -121,90 +116,6 @@ def verify_store(path: str | os.PathLike) -> "RunStore":
     return store
 
 
-@contextlib.contextmanager
-def file_lock(path: str | os.PathLike, wait: bool = True) -> Iterator[IO[str]]:
-    """Open ``path`` (created if absent, its content kept) and hold an exclusive ``fcntl`` lock on it.
-
-    The lock is released on exit, and by the kernel when the process dies (even on SIGKILL).
-    Without ``wait`` a lock held by another process raises BlockingIOError at once. Yields
-    the open file (mode ``a+``) for a holder that records itself in it.
-    """
-    with open(path, "a+") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
-        try:
-            yield fh
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
-
-
-@contextlib.contextmanager
-def run_lock(path: str | os.PathLike, wait: bool = True, what: str = "run store") -> Iterator[None]:
-    """Hold an exclusive lock on ``<store's dir>/.locks/<run_id>.lock`` (released on exit or process
-    death); ``what`` names the store in the error.
-
-    A job whose worker was declared dead may still be running; the lock makes a resubmitted
-    copy wait for it instead of writing the same store at the same time.
-    """
-    path = Path(path)
-    lock_path = path.parent / ".locks" / (path.name.removesuffix(".zarr") + ".lock")
-    lock_path.parent.mkdir(parents=True, exist_ok=True)
-    with contextlib.ExitStack() as stack:
-        try:
-            stack.enter_context(file_lock(lock_path, wait))
-        except BlockingIOError as exc:
-            raise StoreError(f"{what} {str(path)!r} is being written by another process") from exc
-        yield
-
-
-def _jsonable(value: Any) -> Any:
-    """Plain JSON types for attributes (numpy scalars and arrays, non-finite floats as strings)."""
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (np.integer, bool, np.bool_)):
-        return value.item() if isinstance(value, np.generic) else value
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    return value
-
-
-def _write_whole_array(group: zarr.Group, name: str, data: np.ndarray, dtype, dims, attributes: dict) -> None:
-    """``group[name]`` = ``data`` in one chunk, with its dimension names and attributes (replacing any)."""
-    arr = group.create_array(
-        name,
-        shape=data.shape,
-        dtype=dtype,
-        chunks=data.shape,
-        dimension_names=dims,
-        overwrite=True,
-        attributes=attributes,
-    )
-    arr[...] = data
-
-
-class GroupStore:
-    """What every store of ours shares: its path, its root Zarr group, whether one exists at a
-    path, its attributes and its status (:class:`RunStore`, the whole tree's ExtendedStore)."""
-
-    def __init__(self, path: Path, group: zarr.Group) -> None:
-        self.path = Path(path)
-        self.group = group
-
-    @staticmethod
-    def exists(path: str | os.PathLike) -> bool:
-        return (Path(path) / "zarr.json").is_file()
-
-    @property
-    def attrs(self) -> dict[str, Any]:
-        return dict(self.group.attrs)
-
-    @property
-    def status(self) -> str:
-        return self.group.attrs["status"]
-
-
 class RunStore(GroupStore, CheckpointsMixin):
     """One run's Zarr store. Create with :meth:`create`, reopen with :meth:`open`.
 
@@ -227,7 +138,7 @@ class RunStore(GroupStore, CheckpointsMixin):
     ) -> "RunStore":
         """A new store (refuses to overwrite) holding the run's identity and ``status="running"``."""
         path = Path(path)
-        config = _jsonable(config)
+        config = jsonable(config)
         attrs = {
             "format": FORMAT,
             "run_id": run_id,
@@ -238,16 +149,12 @@ class RunStore(GroupStore, CheckpointsMixin):
             "wall_seconds": 0.0,
             "config": config,
             "config_hash": config_hash(config),
-            "coords": _jsonable(coords),
+            "coords": jsonable(coords),
             "checkpoint": None,
             "trace_length": 0,
             "resumes": [],
         }
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            group = zarr.open_group(str(path), mode="w-", attributes=attrs, zarr_format=3)
-        except (FileExistsError, zarr.errors.ContainsGroupError, zarr.errors.ContainsArrayError) as exc:
-            raise StoreError(f"run store {str(path)!r} already exists") from exc
+        group = create_group(path, attrs, "run store")
         store = cls(path, group)
         store._create_trace()
         return store
@@ -278,11 +185,11 @@ class RunStore(GroupStore, CheckpointsMixin):
 
     def _set_attrs(self, **values: Any) -> None:
         """One atomic write of the root ``zarr.json`` with the given attributes changed."""
-        self.group.update_attributes(_jsonable(values))
+        self.group.update_attributes(jsonable(values))
 
     def check_config(self, config: Mapping[str, Any]) -> None:
         """Refuse (:class:`ConfigError`) a requested config whose result-determining part differs."""
-        requested = _jsonable(config)
+        requested = jsonable(config)
         # The stored config is hashed anew: the hash's definition may have grown (new keys
         # at their neutral values are left out), the stored string would then be stale.
         if config_hash(requested) == config_hash(self.group.attrs["config"]):
@@ -362,7 +269,7 @@ class RunStore(GroupStore, CheckpointsMixin):
                 ),
             )
         for name, data, dtype, dims, attributes in specs:
-            _write_whole_array(group, name, data, dtype, dims, attributes)
+            write_whole_array(group, name, data, dtype, dims, attributes)
 
     def has_tissue(self) -> bool:
         try:
@@ -477,7 +384,7 @@ class RunStore(GroupStore, CheckpointsMixin):
         )
         for name, data, dtype, dims, long_name, units in specs:
             data = np.ascontiguousarray(data, dtype=dtype)
-            _write_whole_array(group, name, data, dtype, dims, {"long_name": long_name, "units": units})
+            write_whole_array(group, name, data, dtype, dims, {"long_name": long_name, "units": units})
         # CRC-32 of what the run produced (tree and committed trace), read back as stored, in the
         # same attribute write that makes the run complete: verify() checks them.
         checksums = {key: crc32(data) for key, data in self._final_arrays(int(trace_length)).items()}

@@ -204,27 +204,7 @@ def mask(
     if data.size == 0 or not np.any(data):
         raise TissueError(f"tissue.path: the mask {path!r} is empty (no nonzero voxel)")
     ndim = data.ndim
-    if images.is_label_map(path):  # the header places the image: a config that says otherwise is a mistake
-        for key, given, stored in (
-            ("voxel_size", voxel_size, attrs["voxel_size"]),
-            ("origin", origin, attrs["origin"]),
-        ):
-            if given is not None and not np.allclose(given, stored, rtol=1e-9, atol=1e-12):
-                raise TissueError(
-                    f"tissue.{key}={given} contradicts the header of {path!r} ({stored}); leave it unset (null)"
-                )
-    h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
-    if h is None or not float(h) > 0:
-        raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
-    if images.is_label_map(path):  # a config's voxel_size is the header's (a run records the value taken)
-        voxel_size_from = f"the header of tissue.path ({path!r})"
-    elif voxel_size is not None:
-        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
-    else:
-        voxel_size_from = f"the voxel_size attribute of tissue.path ({path!r})"
-    org = np.asarray(org, dtype=np.float64)
-    if org.shape != (3,):
-        raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
+    h, org, voxel_size_from = _mask_placement(path, array, voxel_size, origin, attrs)
     given = given_inlets(inlets, inlets_path)
     if given is None:
         raise TissueError(
@@ -239,25 +219,7 @@ def mask(
             raise TissueError(
                 "tissue.labels.exclusion and tissue.exclusion_path both give the exclusion domain: set one"
             )
-        present = set(np.unique(data).tolist())
-        for role, values in by_label.items():  # a label in no voxel is a mistake in every role
-            missing = [v for v in values if v not in present]
-            if missing:
-                raise TissueError(
-                    f"tissue.labels.{role}: no voxel of {path!r} holds the labels {missing} (its labels: "
-                    f"{sorted(present)[:20]}{', ...' if len(present) > 20 else ''})"
-                )
-        named = np.isin(data, [v for k in ("exclusion", "open") for v in by_label.get(k, [])])
-        grid = (np.isin(data, by_label["supply"]) if "supply" in by_label else (data != 0) & ~named).astype(np.uint8)
-        if not grid.any():
-            raise TissueError(
-                f"tissue.labels.supply: no voxel of {path!r} is left for the tissue: every nonzero label is named "
-                f"exclusion or open (its labels: {sorted(present)[:20]})"
-            )
-        if "exclusion" in by_label:
-            extra = np.isin(data, by_label["exclusion"]).astype(np.uint8)
-        if "open" in by_label:
-            open_boundary = np.isin(data, by_label["open"])
+        grid, extra, open_boundary = _label_domains(data, by_label, path)
     if exclusion_path:
         extra, _ = _load_mask_array(exclusion_path, exclusion_array, "exclusion_path")
         if extra.shape != data.shape:
@@ -285,3 +247,53 @@ def mask(
         source=str(path),
         voxel_size_from=voxel_size_from,
     )
+
+
+def _mask_placement(path, array, voxel_size, origin, attrs) -> tuple[float, np.ndarray, str]:
+    """(voxel size [m], origin [m], where the voxel size came from) of a mask: a label map's header,
+    else the config, else the Zarr array's attrs; a config that contradicts a header is refused."""
+    if images.is_label_map(path):  # the header places the image: a config that says otherwise is a mistake
+        for key, given, stored in (
+            ("voxel_size", voxel_size, attrs["voxel_size"]),
+            ("origin", origin, attrs["origin"]),
+        ):
+            if given is not None and not np.allclose(given, stored, rtol=1e-9, atol=1e-12):
+                raise TissueError(
+                    f"tissue.{key}={given} contradicts the header of {path!r} ({stored}); leave it unset (null)"
+                )
+    h, org = mask_geometry(path, array, voxel_size, origin, stored=attrs)
+    if h is None or not float(h) > 0:
+        raise TissueError(f"tissue.voxel_size must be > 0 (metres) for tissue=mask, got {h}")
+    if images.is_label_map(path):  # a config's voxel_size is the header's (a run records the value taken)
+        voxel_size_from = f"the header of tissue.path ({path!r})"
+    elif voxel_size is not None:
+        voxel_size_from = f"tissue.voxel_size={float(h):.4g} (for tissue.path {path!r})"
+    else:
+        voxel_size_from = f"the voxel_size attribute of tissue.path ({path!r})"
+    org = np.asarray(org, dtype=np.float64)
+    if org.shape != (3,):
+        raise TissueError(f"tissue.origin must be [x, y, z] in metres, got {org.tolist()}")
+    return h, org, voxel_size_from
+
+
+def _label_domains(data: np.ndarray, by_label: dict, path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(tissue uint8, exclusion uint8 or None, open bool or None) of a label map read by
+    ``tissue.labels``; every label named must be in some voxel, and some tissue must be left."""
+    present = set(np.unique(data).tolist())
+    for role, values in by_label.items():  # a label in no voxel is a mistake in every role
+        missing = [v for v in values if v not in present]
+        if missing:
+            raise TissueError(
+                f"tissue.labels.{role}: no voxel of {path!r} holds the labels {missing} (its labels: "
+                f"{sorted(present)[:20]}{', ...' if len(present) > 20 else ''})"
+            )
+    named = np.isin(data, [v for k in ("exclusion", "open") for v in by_label.get(k, [])])
+    grid = (np.isin(data, by_label["supply"]) if "supply" in by_label else (data != 0) & ~named).astype(np.uint8)
+    if not grid.any():
+        raise TissueError(
+            f"tissue.labels.supply: no voxel of {path!r} is left for the tissue: every nonzero label is named "
+            f"exclusion or open (its labels: {sorted(present)[:20]})"
+        )
+    extra = np.isin(data, by_label["exclusion"]).astype(np.uint8) if "exclusion" in by_label else None
+    open_boundary = np.isin(data, by_label["open"]) if "open" in by_label else None
+    return grid, extra, open_boundary

@@ -245,41 +245,11 @@ def surface(
             f"organ's surface {str(path)!r} {abs(organ.volume) * 1e6:.4g} ml: no tissue is left between them"
         )
     h = voxel_size if voxel_size is not None else default_voxel_size(n_terminals, volume, 3, q_required, total_flow)
-    lo, hi = organ.bounds
-    lo_all, hi_all = lo, hi
-    if points.ndim == 2 and points.shape[1] == 3 and np.all(np.isfinite(points)):
-        # The grid holds the inlets near the organ too (a heart's ostia lie above its base); one farther
-        # than the organ's extent from its centre is refused by the Tissue, naming the grid's box.
-        near = points[np.all(np.abs(points - 0.5 * (lo + hi)) <= (hi - lo), axis=1)]
-        if len(near):
-            lo_all, hi_all = np.minimum(lo, near.min(axis=0)), np.maximum(hi, near.max(axis=0))
-    origin, counts = grid_axes(lo_all, hi_all, h, MARGIN_FRACTION * float(np.max(hi - lo)))
-    xs, ys, zs = (origin[a] + h * np.arange(counts[a]) for a in range(3))
-    solid = inside_surface(organ, xs, ys, zs, h)
-    if not solid.any():
-        raise TissueError(
-            f"tissue.path: no voxel centre lies inside the surface {str(path)!r} ({np.max(organ.extents) * 1e3:.4g} mm "
-            f"across) at voxels of {h * 1e3:.4g} mm: set a smaller tissue.voxel_size"
-        )
-    cavity = np.zeros_like(solid)
-    for i, mesh in enumerate(cavities):
-        inner = inside_surface(mesh, xs, ys, zs, h)
-        outside = int(np.count_nonzero(inner & ~solid))
-        if outside:
-            raise TissueError(
-                f"tissue.cavity_paths[{i}]: the cavity {str(cavity_paths[i])!r} reaches outside the organ's surface "
-                f"{str(path)!r} ({outside} of its {int(np.count_nonzero(inner))} voxels lie outside it): a cavity "
-                "must lie inside the organ (cut it at the organ's surface, or give the mesh in the organ's frame)"
-            )
-        cavity |= inner
-    tissue_voxels = solid & ~cavity
-    if not tissue_voxels.any():
-        raise TissueError(
-            f"tissue.cavity_paths: the cavities fill every voxel inside {str(path)!r}: no tissue is left to supply"
-        )
+    origin, counts = _grid_of(organ, points, h)
+    solid, cavity = _voxelised(organ, cavities, origin, counts, h, path, cavity_paths)
     tissue = Tissue(
         "surface",
-        tissue_voxels.astype(np.uint8),
+        (solid & ~cavity).astype(np.uint8),
         float(h),
         origin,
         points,
@@ -304,6 +274,47 @@ def surface(
         "x".join(map(str, tissue.shape)),
     )
     return tissue
+
+
+def _grid_of(organ, points: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(origin, counts) of the grid: the organ's box and the inlets near it, plus the margin."""
+    lo, hi = organ.bounds
+    lo_all, hi_all = lo, hi
+    if points.ndim == 2 and points.shape[1] == 3 and np.all(np.isfinite(points)):
+        # The grid holds the inlets near the organ too (a heart's ostia lie above its base); one farther
+        # than the organ's extent from its centre is refused by the Tissue, naming the grid's box.
+        near = points[np.all(np.abs(points - 0.5 * (lo + hi)) <= (hi - lo), axis=1)]
+        if len(near):
+            lo_all, hi_all = np.minimum(lo, near.min(axis=0)), np.maximum(hi, near.max(axis=0))
+    return grid_axes(lo_all, hi_all, h, MARGIN_FRACTION * float(np.max(hi - lo)))
+
+
+def _voxelised(organ, cavities: list, origin, counts, h: float, path, cavity_paths) -> tuple[np.ndarray, np.ndarray]:
+    """(solid, cavity) bool (z, y, x): voxel centres inside the organ, and inside one of its cavities;
+    refused when none is inside the organ, a cavity reaches outside it, or no tissue is left."""
+    xs, ys, zs = (origin[a] + h * np.arange(counts[a]) for a in range(3))
+    solid = inside_surface(organ, xs, ys, zs, h)
+    if not solid.any():
+        raise TissueError(
+            f"tissue.path: no voxel centre lies inside the surface {str(path)!r} ({np.max(organ.extents) * 1e3:.4g} mm "
+            f"across) at voxels of {h * 1e3:.4g} mm: set a smaller tissue.voxel_size"
+        )
+    cavity = np.zeros_like(solid)
+    for i, mesh in enumerate(cavities):
+        inner = inside_surface(mesh, xs, ys, zs, h)
+        outside = int(np.count_nonzero(inner & ~solid))
+        if outside:
+            raise TissueError(
+                f"tissue.cavity_paths[{i}]: the cavity {str(cavity_paths[i])!r} reaches outside the organ's surface "
+                f"{str(path)!r} ({outside} of its {int(np.count_nonzero(inner))} voxels lie outside it): a cavity "
+                "must lie inside the organ (cut it at the organ's surface, or give the mesh in the organ's frame)"
+            )
+        cavity |= inner
+    if not (solid & ~cavity).any():
+        raise TissueError(
+            f"tissue.cavity_paths: the cavities fill every voxel inside {str(path)!r}: no tissue is left to supply"
+        )
+    return solid, cavity
 
 
 def write_surface(path, vertices: np.ndarray, faces: np.ndarray) -> Path:

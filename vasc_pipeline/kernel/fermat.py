@@ -1,8 +1,8 @@
 """The weighted Fermat-Weber point of three points: the local problem of a CCO connection.
 
-:func:`fermat_point` places the new bifurcation of :mod:`vasc_pipeline.engine.cco` (the optimum of
-joining a terminal below a segment); ``_norm3`` is the three-component norm the growth
-kernel shares. Pure geometry, jitted, independent of the tree and the tissue.
+:func:`fermat_point` places the new bifurcation of the CCO growth (:mod:`~vasc_pipeline.kernel.growth`,
+the optimum of joining a terminal below a segment); ``_norm3`` is the three-component norm the
+growth kernel shares. Pure geometry, jitted, independent of the tree and the tissue.
 """
 
 from __future__ import annotations
