@@ -153,7 +153,7 @@ def test_3_empty_output_dir_is_refused_and_reduce_never_creates_its_directory(tm
         ("anneal.steps=99999999999999999999999", r"anneal\.steps must be an integer in \[1, 1e\+15\]"),
         ("+sweep=smoke sweep.steps=[10000000000000000]", r"sweep\.steps\[0\] must be an integer in \[1, 1e\+15\]"),
         ("anneal.trace_every=10000000000000000", r"anneal\.trace_every must be an integer in \[1, 1e\+15\]"),
-        ("checkpoint.every_seconds=1e9", r"checkpoint\.every_seconds must be <= 604800"),
+        ("checkpoint.every_seconds=1e9", r"checkpoint\.every_seconds must lie in \(0, 604800\] \(s; at most a week\)"),
         ("anneal.steps_at_1000=1e30", r"anneal\.steps_at_1000=1e\+30 schedules"),
         ("cluster.startup_timeout=0", r"cluster\.startup_timeout must be a finite number of seconds > 0"),
         ("anneal.calibration_samples=1000000000", r"anneal\.calibration_samples must be an integer in \[1, 1e\+07\]"),

@@ -101,6 +101,7 @@ def test_a_sweep_completes_through_sbatch_workers_and_is_reduced(tmp_path):
         np.testing.assert_array_equal(position, on_local[name][1])
 
 
+@pytest.mark.slow  # a worker job cancelled and replaced: about 40 s; the sbatch path itself runs by default
 def test_a_cancelled_worker_job_is_replaced_and_the_run_resumes_to_the_same_tree(tmp_path):
     run = [
         "tissue=sphere",
