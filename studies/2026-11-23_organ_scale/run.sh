@@ -14,9 +14,7 @@
 # both cores.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+source studies/_dry_run.sh  # from the repository root
 OUT=${1:-results/organ_scale}
 T=(run python benchmarks/time_to_quality.py --out "$OUT" --workers 1)
 # The packing candidate on fast_v1's schedule and budget, as measured (fast has changed since).

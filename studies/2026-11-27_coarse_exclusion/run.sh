@@ -25,9 +25,7 @@
 # measured in docs/findings/coarse-exclusion.md). Runs one job at a time (--workers 1).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+source studies/_dry_run.sh  # from the repository root
 OUT=${1:-results/coarse_exclusion}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2 3)

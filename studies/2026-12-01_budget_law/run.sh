@@ -17,9 +17,7 @@
 # job at a time (--workers 1); start a second copy with the other part to use both cores.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+source studies/_dry_run.sh  # from the repository root
 OUT=${1:-results/budget_law_study}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(1 2)

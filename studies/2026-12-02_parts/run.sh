@@ -27,13 +27,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../.."
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
-merge() {  # merge FROM INTO: FROM's rows appended to INTO, each row once
-  if [ -n "$DRY" ]; then echo "# merge $1 into $2"; return; fi
-  cat "$1" >> "$2" && sort -u -o "$2" "$2"
-}
+source "$here/../_dry_run.sh"
 OUT=${1:-results/studies/parts}
 PARTS=("${@:2}")
 [ ${#PARTS[@]} -gt 0 ] || PARTS=(share n6000 n20000 calibrate check budget)

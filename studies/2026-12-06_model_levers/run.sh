@@ -31,14 +31,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../.."
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
-merge() {  # merge FROM INTO: FROM's rows appended to INTO, each row once; two copies may merge at once
-  if [ -n "$DRY" ]; then echo "# merge $1 into $2"; return; fi
-  touch "$2"
-  flock "$2" sh -c 'cat "$1" >> "$2" && sort -u -o "$2" "$2"' merge "$1" "$2"
-}
+source "$here/../_dry_run.sh"
 OUT=${1:-results/studies/model_levers}
 LEVERS=("${@:2}")
 [ ${#LEVERS[@]} -gt 0 ] || LEVERS=(A A_share A_cco A_near g73 reach0 cut04 A_cut02 A_cut08 A_band cco cco_phys)

@@ -13,11 +13,8 @@ set -euo pipefail
 RUNS_DIR=${RUNS_DIR:-results/studies}
 PAPER_DIR=${PAPER_DIR:-results/paper}
 PYTHON=${PYTHON:-python}
-DRY=
-[ "${1:-}" = --dry-run ] && { DRY=1; shift; }
-
-# run COMMAND...: run it, or print it under --dry-run.
-run() { if [ -n "$DRY" ]; then printf -v line '%q ' "$@"; echo "${line% }"; else "$@"; fi; }
+# --dry-run, run (and merge): the studies' shared shell functions
+source "$(dirname "${BASH_SOURCE[0]}")/../_dry_run.sh"
 
 cluster_overrides() {
     case "${1:-local}" in
