@@ -32,6 +32,23 @@ def make_problem(*overrides: str):
     return engine.build_problem(config.compose(list(overrides)))
 
 
+def random_topology(n, rng):
+    """Parent array of a random rooted binary tree (inlet 0, terminals 1..n, bifurcations n+1..2n-1),
+    built by joining random pairs of subtrees with ``rng`` (a NumPy Generator), independently of
+    the package's own tree builders."""
+    parent = np.full(2 * n, -1, dtype=np.int64)
+    roots = list(range(1, n + 1))
+    nxt = n + 1
+    while len(roots) > 1:
+        a = roots.pop(rng.integers(len(roots)))
+        b = roots.pop(rng.integers(len(roots)))
+        parent[a] = parent[b] = nxt
+        roots.append(nxt)
+        nxt += 1
+    parent[roots[0]] = 0
+    return parent
+
+
 # -- tree topology: a plain swap to compare the kernel's with ------------------------------
 
 

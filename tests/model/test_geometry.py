@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import FAST_2026_12, assert_running_equals_full, make_problem
+from helpers import FAST_2026_12, assert_running_equals_full, make_problem, random_topology
 from scipy.optimize import minimize
 
 from vasc_pipeline import engine, kernel
@@ -21,24 +21,6 @@ def _physics(n, ndim):
     return make_problem("tissue=plane2d" if ndim == 2 else "tissue=sphere", f"n_terminals={n}").physics
 
 
-def _random_topology(n, rng):
-    """Parent array of a random rooted binary tree (inlet 0, terminals 1..n, bifurcations n+1..2n-1).
-
-    Built by joining random pairs of subtrees, independently of :func:`topology_search.topologies`.
-    """
-    parent = np.full(2 * n, -1, dtype=np.int64)
-    roots = list(range(1, n + 1))
-    nxt = n + 1
-    while len(roots) > 1:
-        a = roots.pop(rng.integers(len(roots)))
-        b = roots.pop(rng.integers(len(roots)))
-        parent[a] = parent[b] = nxt
-        roots.append(nxt)
-        nxt += 1
-    parent[roots[0]] = 0
-    return parent
-
-
 def _tree(parent, position):
     n = parent.size // 2
     return Tree(
@@ -51,7 +33,7 @@ def _random_instance(n, ndim, rng):
     position = rng.uniform(0.0, 0.05, (2 * n, 3))
     if ndim == 2:
         position[:, 2] = 0.0
-    return _tree(_random_topology(n, rng), position)
+    return _tree(random_topology(n, rng), position)
 
 
 def _clustered_instance(n, ndim, rng):
@@ -337,7 +319,7 @@ def test_best_topology_beats_random_topologies_and_matches_its_own_list():
         position = np.zeros((10, 3))
         position[0], position[1:6] = inlet, sites
         position[6:] = rng.uniform(0.0, 0.1, (4, 3)) * [1, 1, 0]
-        other = _tree(_random_topology(5, rng), position)
+        other = _tree(random_topology(5, rng), position)
         res = geometry.optimal_bifurcations(other, geometry.vascular_weights(other, problem.physics))
         assert best <= res.cost * (1.0 + 1e-12)
 

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
-from helpers import png_is_a_real_figure
+from helpers import png_is_a_real_figure, random_topology
 
 from vasc_pipeline import config, job, sweep
 from vasc_pipeline.model.costs import node_pressures, poiseuille, tree_pressures
@@ -53,16 +53,7 @@ def random_tree(n_terminals: int, seed: int):
     positions uniform in a 10 mm cube, Murray radii from the terminals downstream."""
     rs = np.random.default_rng(seed)
     n = n_terminals
-    parent = np.full(2 * n, -1, dtype=np.int64)
-    roots = list(range(1, n + 1))
-    nxt = n + 1
-    while len(roots) > 1:
-        a = roots.pop(rs.integers(len(roots)))
-        b = roots.pop(rs.integers(len(roots)))
-        parent[a] = parent[b] = nxt
-        roots.append(nxt)
-        nxt += 1
-    parent[roots[0]] = 0
+    parent = random_topology(n, rs)
     kind = np.full(2 * n, 1, dtype=np.int8)
     kind[0], kind[1 : n + 1] = 0, 2
     position = rs.uniform(0, 1e-2, (2 * n, 3))
