@@ -16,6 +16,9 @@
 #              (tissue.inlet_share_tolerance=0.15, nearest start): the trees trade subtrees inside it
 #   cco        our CCO growth (method=cco) under the paper's physics, and cco_phys under the
 #              physiological model's (gamma 7/3, cutoff 0.4 mm): the constructive baseline
+#   P_hot      model=physiological (A_band) at N = 4000 started at T = 16 W, the temperature the
+#              anneal calibrates at N = 1000 (at N = 4000 it calibrates 1.6-2.4 W, too cold for
+#              the trunks, whose barriers do not shrink with N)
 #
 # Resumable: every run is a checkpointed pipeline job; rerun the same command to continue.
 # Rows of finished runs land in OUT/rows.jsonl and are merged into rows.jsonl beside this
@@ -26,8 +29,8 @@
 #
 # --dry-run prints the commands instead of running them (the tests run that).
 # OUT defaults to results/studies/model_levers (run stores stay out of git); LEVER defaults to
-# every lever above, in order. One job at a time (--workers 1): start a second copy with other
-# levers to use both cores.
+# every lever above, in order. One job at a time (WORKERS=1, the default): start a second copy
+# with other levers, or set WORKERS=2, to use both cores.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here/../.."
@@ -40,6 +43,7 @@ G73=(--override physics.gamma=2.3333333333333335)
 SHARE=(--override "tissue.inlet_share=[0.62,0.38]" --override tissue.inlet_assignment=nearest)
 cut() { echo --override "physics.r_cutoff=$1"; }
 for lever in "${LEVERS[@]}"; do
+  base=paper sizes=(1000 2000)
   case $lever in
     reach0) o=("${REACH0[@]}") ;;
     cut04) o=($(cut 2e-4)) ;;
@@ -53,10 +57,11 @@ for lever in "${LEVERS[@]}"; do
     cco) o=(--override method=cco) ;;
     cco_phys) o=(--override method=cco "${G73[@]}" $(cut 2e-4)) ;;
     A_band) o=("${REACH0[@]}" "${G73[@]}" $(cut 2e-4) "${SHARE[@]}" --override tissue.inlet_share_tolerance=0.15) ;;
-    *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band cco cco_phys, got '$lever'" >&2; exit 2 ;;
+    P_hot) base=physiological sizes=(4000) o=(--override anneal.T_start=16) ;;
+    *) echo "LEVER must be one of reach0 cut04 g73 A A_share A_near A_cco A_cut02 A_cut08 A_band cco cco_phys P_hot, got '$lever'" >&2; exit 2 ;;
   esac
-  # every lever is a change to the paper's model (the package's default is the physiological one)
-  run python benchmarks/time_to_quality.py --out "$OUT" --workers 1 --anneal fast --sizes 1000 2000 --seeds 0 1 \
-    --label "$lever" --override model=paper "${o[@]}"
+  # every lever is a change to a named model (the paper's, unless the lever says otherwise)
+  run python benchmarks/time_to_quality.py --out "$OUT" --workers "${WORKERS:-1}" --anneal fast --sizes "${sizes[@]}" \
+    --seeds 0 1 --label "$lever" --override "model=$base" "${o[@]}"
   merge "$OUT/rows.jsonl" "$here/rows.jsonl"
 done

@@ -114,6 +114,21 @@ def test_the_reduction_imports_neither_the_pipeline_nor_the_figures():
             assert not up, (name, sorted(up))
 
 
+def test_numba_kernels_live_in_the_kernel():
+    """Outside ``kernel/`` only the generator (``model/rng.py``, which the model's own builders
+    draw from in Python) is compiled."""
+    for name, path in modules().items():
+        if name.startswith("vasc_pipeline.kernel") or name in ("vasc_pipeline._jit", "vasc_pipeline.model.rng"):
+            continue
+        decorated = {
+            getattr(d, "id", getattr(d, "attr", None))
+            for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, ast.FunctionDef)
+            for d in node.decorator_list
+        }
+        assert not decorated & JIT_DECORATORS, name
+
+
 def test_every_kernel_module_declares_its_names():
     for path in (PACKAGE / "kernel").glob("*.py"):
         if path.name != "__init__.py":

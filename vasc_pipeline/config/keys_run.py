@@ -102,6 +102,17 @@ RUN_KEYS: tuple[Key, ...] = (
         check=Range(0, lo_open=True, null=True),
     ),
     Key(
+        "anneal.T_start_min",
+        "W",
+        (
+            "a calibrated start temperature is raised to this; null: not raised. The calibration "
+            "reads the typical move, whose cost falls with N, while the trunks' barriers do not"
+        ),
+        default="heart: 16 (`model=physiological`); else {}",
+        accepted="{}",
+        check=Range(0, lo_open=True, null=True),
+    ),
+    Key(
         "anneal.T_end",
         "W",
         ("end temperature; null: `T_end_rel` times the cost of one terminal segment of length R_supply"),
@@ -274,6 +285,16 @@ RUN_KEYS: tuple[Key, ...] = (
         "with polish, up to this N: a single-swap descent with optimal geometry",
         accepted="{}",
         check=Range(0, integer=True),
+    ),
+    Key(
+        "anneal.polish_regrafts",
+        "–",
+        (
+            "with polish, a prune-and-regraft descent: each subtree moved onto a nearby segment "
+            "where the total cost drops (strays the anneal's swaps cannot bring home)"
+        ),
+        default="true (`model=physiological`); else {}",
+        accepted="true, false",
     ),
     Key(
         "anneal.trace_every",

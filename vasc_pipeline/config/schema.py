@@ -96,6 +96,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
+    "anneal.T_start_min": None,
+    "anneal.polish_regrafts": False,
     "anneal.packing_T_end": 0.05,
     "anneal.init": "random",
     "anneal.full_width_phase": 1.0,
@@ -217,6 +219,7 @@ class AnnealConfig(Settings):
 
     name: str = "fast"
     T_start: Optional[float] = None  # W; None: calibrated so uphill moves start accept_start accepted
+    T_start_min: Optional[float] = None  # W; a calibrated T_start is raised to it (None: not raised)
     T_end: Optional[float] = None  # W; None: T_end_rel * (cost of one terminal segment of length R_supply)
     accept_start: float = 0.8  # mean acceptance of uphill moves at a calibrated T_start
     T_end_rel: float = 1e-4  # calibrated T_end relative to w(1) R_supply
@@ -251,6 +254,7 @@ class AnnealConfig(Settings):
     adapt_window: int = 1000  # proposals of a class between adaptations
     polish: bool = True  # optimise the final topology's bifurcation positions (engine.polish)
     polish_swaps_max_terminals: int = 8  # with polish, up to this N: single-swap descent (engine.polish.descend_swaps)
+    polish_regrafts: bool = False  # with polish, prune-and-regraft descent (engine.polish.descend_regrafts)
     trace_every: int = 100_000  # steps between trace records (with parts > 1: one record a phase)
     # One tree on several workers (engine.parts): the tree anneal in part_phases phases, each
     # part_share of its proposals in `parts` independent parts of the tree (run by the cluster's

@@ -31,7 +31,7 @@ nearer to a neighbour's terminal); the fine segments that cross a cavity (the ex
 outside the tissue, exact voxel traversal) or leave the tissue, and their lengths.
 
 The source run is read by :mod:`vasc_pipeline.engine.source` (:func:`read_source`, re-exported
-here). Pure NumPy and one small numba kernel (:func:`_segment_voxel_lengths`); no Hydra, no Dask, no
+here). Pure NumPy and one small numba kernel (:func:`vasc_pipeline.kernel.voxel_code_lengths`); no Hydra, no Dask, no
 store: :mod:`vasc_pipeline.pipeline.extend` fans the batches out and
 :mod:`vasc_pipeline.store.extended` writes them.
 """
@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import jit
+from ..kernel import voxel_code_lengths
 from ..model.physics import CostTables, Physics, cost_tables, segment_factors
 from ..model.rng import seed_state
 from ..model.topology import KIND_TERMINAL, KIND_TERRITORY_ROOT, segment_lengths, terminals_downstream
@@ -320,67 +320,13 @@ def plan_extension(
 # Growing territories
 
 
-@jit
-def _segment_voxel_lengths(box, origin, voxel_size, p0, p1, out):
-    """Per segment (rows of p0 -> p1, m), the length [m] inside each voxel code of ``box``.
-
-    ``out`` float64 (n, 5): columns CODE_OUTSIDE .. CODE_CAVITY, and the last the length beyond
-    the box. The exact traversal of :func:`vasc_pipeline.model.costs.voxel_pieces`: the segment is
-    cut where it crosses a voxel face and each piece charged to the voxel of its midpoint.
-    """
-    nz, ny, nx = box.shape
-    t = np.empty(256)
-    u0 = np.empty(3)
-    d = np.empty(3)
-    for s in range(p0.shape[0]):
-        for a in range(3):
-            u0[a] = (p0[s, a] - origin[a]) / voxel_size
-            d[a] = (p1[s, a] - origin[a]) / voxel_size - u0[a]
-        length = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        for c in range(5):
-            out[s, c] = 0.0
-        if length == 0.0:
-            continue
-        count = 2
-        t[0] = 0.0
-        t[1] = 1.0
-        for a in range(3):
-            if d[a] != 0.0:
-                lo = min(u0[a], u0[a] + d[a])
-                hi = max(u0[a], u0[a] + d[a])
-                first = math.ceil(lo - 0.5)
-                last = math.floor(hi - 0.5)
-                need = count + max(0, last - first + 1)
-                if need > t.size:
-                    grown = np.empty(2 * need)
-                    grown[:count] = t[:count]
-                    t = grown
-                inv = 1.0 / d[a]
-                for k in range(first, last + 1):
-                    t[count] = min(max(((k + 0.5) - u0[a]) * inv, 0.0), 1.0)
-                    count += 1
-        ts = np.sort(t[:count])
-        for j in range(count - 1):
-            if ts[j + 1] <= ts[j]:
-                continue
-            mid = 0.5 * (ts[j] + ts[j + 1])
-            x = int(math.floor(u0[0] + mid * d[0] + 0.5))
-            y = int(math.floor(u0[1] + mid * d[1] + 0.5))
-            z = int(math.floor(u0[2] + mid * d[2] + 0.5))
-            piece = (ts[j + 1] - ts[j]) * length * voxel_size
-            if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz:
-                out[s, box[z, y, x]] += piece
-            else:
-                out[s, 4] += piece
-
-
 def segment_voxel_lengths(box, origin, voxel_size: float, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
     """float64 (n, 5): the length [m] of each segment p0 -> p1 inside voxels of each code of ``box``
     (columns CODE_OUTSIDE, CODE_TERRITORY, CODE_TISSUE, CODE_CAVITY) and beyond the box (column 4)."""
     p0 = np.ascontiguousarray(p0, dtype=np.float64).reshape(-1, 3)
     p1 = np.ascontiguousarray(p1, dtype=np.float64).reshape(-1, 3)
     out = np.empty((p0.shape[0], 5))
-    _segment_voxel_lengths(
+    voxel_code_lengths(
         np.ascontiguousarray(box, dtype=np.uint8),
         np.ascontiguousarray(origin, dtype=np.float64),
         float(voxel_size),

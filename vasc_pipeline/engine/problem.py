@@ -342,7 +342,9 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
     probability ``anneal.accept_start``, the usual criterion (Johnson et al. 1989).
     T_end: ``anneal.T_end_rel`` times the cost of one terminal segment of length R_supply,
     w(1) R_supply: well below it no uphill rearrangement of the finest branches survives,
-    so colder steps would be wasted. T_start is raised to 10 T_end if it came out lower.
+    so colder steps would be wasted. T_start is raised to 10 T_end if it came out lower, and
+    to ``anneal.T_start_min`` when set: the calibration reads the typical move, whose cost
+    falls with N, while the barrier of a trunk through a cavity does not.
     """
     a = problem.config.anneal
     t_end = scheduled_T_end(a, problem.physics)
@@ -359,6 +361,8 @@ def calibrate_schedule(problem: Problem, state: kernel.State) -> tuple[float, fl
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if np.mean(np.exp(-uphill / np.exp(mid))) < a.accept_start else (lo, mid)
         t_start = max(t_start, float(np.exp(hi)))
+    if a.T_start_min is not None:
+        t_start = max(t_start, float(a.T_start_min))
     return t_start, float(t_end)
 
 

@@ -26,7 +26,7 @@ from ..model.rng import next_double
 from ..model.tree import Tree
 from ..store.trace import Trace, TraceRecord
 from .parts import anneal_parts, make_parts, merge_parts, phase_ends
-from .polish import descend_swaps, polish
+from .polish import descend_regrafts, descend_swaps, polish
 from .problem import (
     Problem,
     build_problem,
@@ -183,7 +183,8 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
         rng_saved, counters_saved = state.rng.copy(), state.counters.copy()
         result = polish(problem, state)
         swaps = descend_swaps(problem, state) if problem.physics.n_terminals <= a.polish_swaps_max_terminals else 0
-        if swaps:
+        regrafts = descend_regrafts(problem, state) if a.polish_regrafts else 0
+        if swaps or regrafts:
             polish(problem, state)  # exclusion may leave the new optimum only partly taken
         state.rng[:], state.counters[:] = rng_saved, counters_saved
         after = running_costs(problem, state)
@@ -191,6 +192,7 @@ def finish(problem: Problem, state: kernel.State) -> dict[str, Any]:
             "applied": result["applied"],
             "moved": result["moved"],
             "swaps": swaps,
+            "regrafts": regrafts,
             "total_before": result["before"]["total"],
             "total_after": after["total"],
             "vascular_before": vascular_cost(result["before"]),

@@ -23,7 +23,10 @@ __all__ = ["plot_cost_traces", "plot_convergence", "plot_convergence_studies"]
 
 @styled
 def plot_cost_traces(summary: xr.DataTree, path, max_panels: int = 24) -> Path | None:
-    """Annealed total cost against step, every seed, one panel per cell (the best seed drawn bold)."""
+    """Annealed total cost against step, every seed, one panel per cell (the best seed drawn bold).
+    None for a summary kept without its traces (``results/paper``'s)."""
+    if "traces" not in summary.children:
+        return None
     traces = summary["traces"].to_dataset()
     costs = summary["costs"].to_dataset()
     dims = cell_dims(summary)

@@ -16,6 +16,7 @@ The kernel sees only two named tuples of arrays and scalars (built by
 - :mod:`~vasc_pipeline.kernel.margins`: voxels near another part's region (a tree in parts)
 - :mod:`~vasc_pipeline.kernel.growth`: the CCO growth (``method=cco``), one terminal at a time
 - :mod:`~vasc_pipeline.kernel.fermat`: the weighted Fermat-Weber point, a CCO connection's optimum
+- :mod:`~vasc_pipeline.kernel.traversal`: segments' lengths per voxel code (the whole tree's extension)
 
 :func:`anneal_block` runs a block of proposed moves from ``state`` and returns; the
 temperature and every random draw depend only on the step number and the saved state, so
@@ -111,6 +112,9 @@ from .swaps import (
     swap_nodes,
     swap_random,
 )
+from .traversal import (
+    voxel_code_lengths,
+)
 
 __all__ = [
     "ACCEPTED",
@@ -170,6 +174,7 @@ __all__ = [
     "sample_uphill",
     "scaled_total_without_supply",
     "translate_node",
+    "voxel_code_lengths",
     "fermat_point",
     "MAX_FORBIDDEN_REFUSALS",
     "connection_cost",
