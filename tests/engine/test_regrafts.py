@@ -108,3 +108,11 @@ def test_the_start_temperature_is_raised_to_its_floor_and_only_raised():
         raised = make_problem("tissue=heart", "n_terminals=60", f"anneal.T_start_min={floor}")
         assert engine.calibrate_schedule(raised, state) == (pytest.approx(expected, rel=1e-12), t_end)
     assert make_problem(*PHYSIOLOGICAL_HEART).config.anneal.T_start_min == 16.0
+
+
+def test_a_tree_with_fewer_nodes_than_neighbours_is_searched_whole():
+    problem, state = _hot_state("model=physiological", "tissue=heart", "n_terminals=4", steps=2_000)
+    before = kernel.scaled_total_without_supply(problem.model, state)
+    finish.descend_regrafts(problem, state, neighbours=8)  # 6 non-inlet nodes
+    assert kernel.scaled_total_without_supply(problem.model, state) <= before
+    assert_running_equals_full(problem, state)

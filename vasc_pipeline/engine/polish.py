@@ -181,8 +181,11 @@ def descend_regrafts(problem, state: kernel.State, neighbours: int = 8, max_roun
     weight = _regraft_weights(problem)
     applied = 0
     kernel.initialise(model, state)
+    nodes = state.parent.size - k
     for _ in range(max_rounds):
-        nearest = cKDTree(state.position[k:]).query(state.position[k:], neighbours + 1)[1] + k
+        nearest = (
+            cKDTree(state.position[k:]).query(state.position[k:], min(neighbours + 1, nodes))[1].reshape(nodes, -1) + k
+        )
         before = applied
         for x in k + np.lexsort((-state.seg_length[k:], state.n_downstream[k:])):
             best = _best_regraft(model, state, weight, int(x), nearest[x - k])
