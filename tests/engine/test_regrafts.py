@@ -53,7 +53,7 @@ def test_the_estimated_change_of_a_regraft_is_the_recomputed_one():
     for _ in range(400):
         x, j = (int(v) for v in rng.integers(k, state.parent.size, 2))
         b = state.parent[x]
-        if b < k or j in (x, b, finish._sibling(state, x)) or finish._in_subtree(state.parent, j, x):
+        if b < k or j in (x, b, finish._sibling(state, x)) or x in finish._ancestors(state.parent, j):
             continue
         y = finish._nearest_on_segment(state.position[x], state.position[j], state.position[state.parent[j]])
         change = finish._regraft_change(problem.model, state, weight, x, j, y)

@@ -218,7 +218,7 @@ def _best_regraft(model, state, weight, x: int, candidates: np.ndarray):
     s = _sibling(state, x)
     best = None
     for j in candidates:
-        if j in (x, b, s) or _in_subtree(parent, int(j), x):
+        if j in (x, b, s) or x in _ancestors(parent, int(j)):
             continue
         y = _nearest_on_segment(state.position[x], state.position[j], state.position[parent[j]])
         if not legal_position(model, False, y):
@@ -227,14 +227,6 @@ def _best_regraft(model, state, weight, x: int, candidates: np.ndarray):
         if change is not None and change < 0.0 and (best is None or change < best[0]):
             best = (change, int(j), y)
     return None if best is None else best[1:]
-
-
-def _in_subtree(parent: np.ndarray, j: int, x: int) -> bool:
-    while j >= 0:
-        if j == x:
-            return True
-        j = parent[j]
-    return False
 
 
 def _nearest_on_segment(p: np.ndarray, a: np.ndarray, c: np.ndarray) -> np.ndarray:
