@@ -52,12 +52,15 @@ from vasc_pipeline.reduce.fidelity import (
 def exclusion_by_segment(tissue, physics: dict, tree: dict) -> np.ndarray:
     """Weighted exclusion cost (A_o/A_wv) pi r^2 sum_v (D_v L_v)^6 of every segment [W]."""
     from vasc_pipeline import costs
+    from vasc_pipeline.model.physics import exclusion_weight
 
     parent, position, radius = tree["parent"], tree["position"], tree["radius"]
-    counted = (parent >= 0) & (radius > physics["r_cutoff"])
+    weight = exclusion_weight(radius, physics["r_cutoff"], physics.get("r_cutoff_ramp", 0.0))
+    counted = (parent >= 0) & (weight > 0)
     out = np.zeros(parent.size)
     for i in np.flatnonzero(counted):
-        out[i] = np.pi * radius[i] ** 2 * costs.exclusion_sum(position[parent[i]], position[i], tissue.exclusion_grid)
+        area = np.pi * radius[i] ** 2 * weight[i]
+        out[i] = area * costs.exclusion_sum(position[parent[i]], position[i], tissue.exclusion_grid)
     return out * physics["A_o"] / physics["A_wv"]
 
 

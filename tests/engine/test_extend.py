@@ -165,6 +165,7 @@ def territory_problem(plan: ex.ExtensionPlan, t: ex.TerritoryInput, tmp_path: Pa
         f"physics.gamma={tp.gamma!r}",
         f"physics.m_b={tp.m_b!r}",
         f"physics.viscosity={tp.viscosity!r}",
+        f"physics.viscosity_law={tp.viscosity_law}",
     ]
     return engine.build_problem(config.compose(overrides))
 

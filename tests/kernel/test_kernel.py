@@ -26,8 +26,17 @@ COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, 
         ("tissue=sphere", "n_terminals=120"),
         ("tissue=box", "n_terminals=120"),
         ("tissue=heart", "n_terminals=120"),  # two inlets: subtrees move between LCA and RCA trees
+        # the paper's radii from r_t = 0.215 mm: segments of 1-3 terminals on the exclusion ramp
+        # (weights 0.07-0.9), viscosity by diameter
+        (
+            "tissue=heart",
+            "n_terminals=120",
+            "physics.r_cutoff=2e-4",
+            "physics.r_cutoff_ramp=2e-4",
+            "physics.viscosity_law=pries_in_vivo",
+        ),
     ],
-    ids=["plane2d", "sphere", "box", "heart"],
+    ids=["plane2d", "sphere", "box", "heart", "heart-ramp-viscosity"],
 )
 def test_running_sums_equal_full_recomputation_after_a_million_moves(overrides):
     steps = 1_000_000

@@ -94,3 +94,67 @@ def test_default_voxel_size_follows_the_supply_radius_also_with_q_required(tissu
     assert problem.physics.supply_radius == pytest.approx(
         (3.0 * 4.16e-6 / 200 / 0.05 / (4.0 * math.pi)) ** (1.0 / 3.0), rel=1e-12
     )
+
+
+def test_viscosity_laws_against_pries_by_hand():
+    """Both Pries fits at discharge hematocrit 0.45, divided by their large-vessel value 3.2,
+    written out here once more from the papers' formulas."""
+    d = np.array([5.0, 10.0, 20.0, 50.0, 100.0, 400.0])  # µm
+    in_vitro = 220 * np.exp(-1.3 * d) + 3.2 - 2.44 * np.exp(-0.06 * d**0.645)
+    w = (d / (d - 1.1)) ** 2
+    in_vivo = (1 + (6 * np.exp(-0.085 * d) + 3.2 - 2.44 * np.exp(-0.06 * d**0.645) - 1) * w) * w
+    diameter = d * 1e-6
+    np.testing.assert_allclose(physics.relative_viscosity(diameter, "pries_in_vitro"), in_vitro / 3.2, rtol=1e-12)
+    np.testing.assert_allclose(physics.relative_viscosity(diameter, "pries_in_vivo"), in_vivo / 3.2, rtol=1e-12)
+    assert np.all(physics.relative_viscosity(diameter, "constant") == 1.0)
+    # Fåhræus–Lindqvist: thinner blood from 400 down to 10 µm; in vivo the endothelial surface
+    # layer makes capillaries more viscous than large vessels again.
+    vitro = physics.relative_viscosity(diameter, "pries_in_vitro")
+    assert np.all(np.diff(vitro[1:]) > 0) and vitro[1] == pytest.approx(0.415, abs=1e-3)
+    assert physics.relative_viscosity(5e-6, "pries_in_vivo") > 3.0
+    # The in-vivo fit relative to plasma: 5.87 at 10 µm, 2.53 at 100 µm.
+    in_vivo_to_plasma = 3.2 * physics.relative_viscosity(np.array([10e-6, 100e-6]), "pries_in_vivo")
+    np.testing.assert_allclose(in_vivo_to_plasma, [5.87, 2.53], atol=0.01)
+    # Large vessels keep physics.viscosity (in vivo up to the (D / (D - 1.1))^2 factor, 1.0006 at 4 mm).
+    for law in ("pries_in_vitro", "pries_in_vivo"):
+        assert physics.relative_viscosity(4e-3, law) == pytest.approx(1.0, abs=2e-3)
+    with pytest.raises(ValueError, match="physics.viscosity_law"):
+        physics.relative_viscosity(diameter, "blood")
+
+
+def test_viscosity_law_scales_resistance_and_power_only():
+    constant = physics.cost_tables(coronary())
+    for law in ("pries_in_vitro", "pries_in_vivo"):
+        p = coronary(viscosity_law=law)
+        varying = physics.cost_tables(p)
+        n = np.arange(1, 1001)
+        factor = physics.relative_viscosity(2 * p.radius(n), law)
+        np.testing.assert_allclose(varying.resistance[1:], constant.resistance[1:] * factor, rtol=1e-12)
+        np.testing.assert_allclose(varying.power[1:], constant.power[1:] * factor, rtol=1e-12)
+        for row in (physics.TABLE_VOLUME, physics.TABLE_EXCLUSION, physics.TABLE_FLOW):
+            np.testing.assert_array_equal(varying.array[row], constant.array[row])
+        assert np.all(varying.array[:, 0] == 0)
+        # The terminal segments (D ~ 156 µm at N = 1000, gamma 2.1) lose a sixth of their resistance.
+        assert 0.6 < factor[0] < 0.9
+
+
+def test_physics_attrs_keep_the_law_and_old_stores_read_as_constant():
+    p = coronary(viscosity_law="pries_in_vivo")
+    assert physics.Physics(**p.as_attrs()) == p
+    old = {k: v for k, v in coronary().as_attrs().items() if k not in ("viscosity_law", "r_cutoff_ramp")}
+    assert physics.Physics(**old) == coronary()
+    assert (physics.Physics(**old).viscosity_law, physics.Physics(**old).r_cutoff_ramp) == ("constant", 0.0)
+
+
+def test_exclusion_ramp_weights_the_exclusion_table():
+    r = np.array([0.0, 1e-4, 2e-4, 2.5e-4, 3e-4, 4e-4, 5e-4])
+    np.testing.assert_array_equal(physics.exclusion_weight(r, 2e-4, 0.0), [0, 0, 0, 1, 1, 1, 1])
+    np.testing.assert_allclose(physics.exclusion_weight(r, 2e-4, 2e-4), [0, 0, 0, 0.25, 0.5, 1, 1])
+    step = physics.cost_tables(coronary(r_cutoff=2e-4))
+    p = coronary(r_cutoff=2e-4, r_cutoff_ramp=2e-4)
+    ramp = physics.cost_tables(p)
+    radius = p.radius(np.arange(1001))
+    weight = np.clip((radius - 2e-4) / 2e-4, 0, 1)
+    np.testing.assert_allclose(ramp.exclusion, np.pi * radius**2 * weight, rtol=1e-12)
+    assert np.all(ramp.exclusion <= step.exclusion) and np.any((ramp.exclusion > 0) & (ramp.exclusion < step.exclusion))
+    np.testing.assert_array_equal(ramp.exclusion[radius >= 4e-4], step.exclusion[radius >= 4e-4])

@@ -233,11 +233,13 @@ def _check_segment_costs(cfg: RunConfig) -> None:
     solve fails far from the setting that caused it)."""
     import numpy as np
 
+    from ..model.physics import relative_viscosity
+
     p = cfg.physics
     n = np.arange(1, cfg.n_terminals + 1, dtype=np.float64)
     with np.errstate(all="ignore"):
         r = p.inlet_radius * (n / cfg.n_terminals) ** (1.0 / p.gamma)
-        resistance = 8.0 * p.viscosity / (math.pi * r**4)
+        resistance = 8.0 * p.viscosity * relative_viscosity(2.0 * r, p.viscosity_law) / (math.pi * r**4)
         parts = {
             "radius": r,
             "resistance": resistance,

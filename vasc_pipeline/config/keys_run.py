@@ -16,6 +16,7 @@ from .keyspec import (
     Range,
     packing_on,
     supply_schedule_on,
+    viscosity_laws,
 )
 from .rules import MAX_STEPS, SWEPT_KEYS
 from .schema import (
@@ -55,12 +56,33 @@ RUN_KEYS: tuple[Key, ...] = (
     Key(
         "physics.m_b", "W m⁻³", "metabolic cost of blood volume (a sweep axis)", accepted="{}", check=SWEPT_KEYS["m_b"]
     ),
-    Key("physics.viscosity", "Pa s", "blood viscosity μ", accepted="{}", check=POSITIVE),
+    Key("physics.viscosity", "Pa s", "blood viscosity μ in large vessels", accepted="{}", check=POSITIVE),
+    Key(
+        "physics.viscosity_law",
+        "–",
+        (
+            "how the viscosity varies with the diameter D: `constant`, or μ(D) / μ(large) from Pries' fit "
+            "at hematocrit 0.45 in glass tubes (`pries_in_vitro`) or in living microvessels (`pries_in_vivo`) "
+            "([The costs](model.md#the-costs))"
+        ),
+        accepted="{}",
+        check=OneOf(viscosity_laws),
+    ),
     Key(
         "physics.r_cutoff",
         "m",
         "only segments with r > r_cutoff pay the exclusion term",
         default="2e-4 (`model=physiological`); {} (`model=paper`, the paper's 0.01 mm)",
+        accepted="{}",
+        check=NON_NEGATIVE,
+    ),
+    Key(
+        "physics.r_cutoff_ramp",
+        "m",
+        (
+            "the exclusion term's weight rises linearly from 0 at r_cutoff to 1 at r_cutoff + r_cutoff_ramp; "
+            "0: a step at r_cutoff ([The costs](model.md#the-costs))"
+        ),
         accepted="{}",
         check=NON_NEGATIVE,
     ),

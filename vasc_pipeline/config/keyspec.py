@@ -274,6 +274,12 @@ def tissue_names() -> tuple:
     return tuple(sorted(TISSUES))
 
 
+def viscosity_laws() -> tuple:
+    from ..model.physics import VISCOSITY_LAWS
+
+    return VISCOSITY_LAWS
+
+
 def mesh_units() -> tuple:
     from ..model.tissue.surfaces import MESH_UNITS
 

@@ -93,6 +93,8 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.cavity_paths": None,
     "tissue.mesh_unit": "m",
     "tissue.demand_path": None,
+    "physics.viscosity_law": "constant",
+    "physics.r_cutoff_ramp": 0.0,
     "anneal.steps_exponent": 2.0,
     "anneal.packing_steps_per_terminal": 0.0,
     "anneal.packing_T_start": 1.0,
@@ -202,8 +204,10 @@ class PhysicsConfig(Settings):
     inlet_radius: float = 2.1e-3  # combined inlet radius r_in, m
     total_flow: float = 4.16e-6  # Q0, m^3 s^-1
     m_b: float = 641.3  # W m^-3
-    viscosity: float = 3.6e-3  # Pa s
+    viscosity: float = 3.6e-3  # Pa s, in large vessels
+    viscosity_law: str = "constant"  # how it varies with the diameter (model.physics.VISCOSITY_LAWS)
     r_cutoff: float = 1e-5  # m
+    r_cutoff_ramp: float = 0.0  # m; the exclusion weight rises from 0 at r_cutoff to 1 at r_cutoff + ramp
     A_wv: float = 1e4
     A_o: float = 100.0
     A_p: float = 0.0

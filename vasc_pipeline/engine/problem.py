@@ -153,12 +153,14 @@ def _physics(cfg: RunConfig, tissue: Tissue) -> Physics:
         # with a demand map the spheres fill the demand-weighted volume, sum of t_v voxel volumes
         supply_radius=supply_radius(n, tissue.supply_measure, tissue.ndim, cfg.tissue.q_required, p.total_flow),
         r_cutoff=p.r_cutoff,
+        r_cutoff_ramp=p.r_cutoff_ramp,
         A_wv=p.A_wv,
         A_o=p.A_o,
         A_p=p.A_p,
         A_s=p.A_s,
         pressure_inlet=p.pressure_inlet,
         pressure_terminal=p.pressure_terminal,
+        viscosity_law=p.viscosity_law,
     )
 
 

@@ -204,7 +204,8 @@ class Poiseuille(NamedTuple):
     n_downstream : int64 (node,)   terminals downstream (their flows add up)
     length : float64 (node,)       segment length [m]
     flow : float64 (node,)         n Q0 / N [m^3 s^-1]
-    resistance : float64 (node,)   8 mu L / (pi r^4) of the segment [Pa s m^-3]
+    resistance : float64 (node,)   8 mu L / (pi r^4) of the segment [Pa s m^-3], mu = mu(2 r) under
+                                   ``physics.viscosity_law``
     pressure : float64 (node,)     [Pa], ``physics.pressure_inlet`` at the inlets
     """
 

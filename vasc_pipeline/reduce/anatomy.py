@@ -11,8 +11,9 @@ into one flat dict of named numbers (:data:`ANATOMY_FIELDS` gives each its unit 
 - Vessels on the organ: the share of bifurcations more than :data:`OFF_ORGAN_DISTANCE` outside
   the exclusion domain, and their median distance.
 - Blood reaches the terminals: terminal pressures of the model's own Poiseuille solution (every
-  segment carries n Q0 / N through 8 mu L / (pi r^4), from ``physics.pressure_inlet`` at the
-  inlets): minimum, median, the mean drop, and how many are below zero.
+  segment carries n Q0 / N through 8 mu L / (pi r^4), mu = mu(2 r) under
+  ``physics.viscosity_law``, from ``physics.pressure_inlet`` at the inlets): minimum, median,
+  the mean drop, and how many are below zero.
 - Scaling laws of the crowns (Huo & Kassab 2009, 2012): for every stem segment, its crown is the
   stem and everything downstream; the stem diameter D_s grows as L_c^(3/7) with the crown's
   total length L_c, and the crown's volume V_c as D_s^3. The exponents are least-squares slopes

@@ -1,7 +1,8 @@
 """A tree as a 0D network for svZeroDSolver (``pip install svzerod``): the format blood-flow
 simulations of generated trees start from.
 
-One ``BloodVessel`` per segment with its Poiseuille resistance 8 μ L / (π r⁴) (the model's,
+One ``BloodVessel`` per segment with its Poiseuille resistance 8 μ L / (π r⁴) (μ = μ(2r) under
+``physics.viscosity_law``; the model's,
 from :func:`vasc_pipeline.model.physics.cost_tables`), one junction per bifurcation (mass
 conservation, one pressure), a ``FLOW`` condition at each inlet's root segment with the model's
 flow n Q0 / N, and a ``PRESSURE`` condition at each terminal: the terminal pressure of the
