@@ -129,8 +129,39 @@ def test_the_packing_phase_leaves_bifurcations_in_the_region():
         (["tissue.bifurcation_reach=-0.001"], "tissue.bifurcation_reach must be a length >= 0"),
         (["tissue.bifurcation_reach=.inf"], "tissue.bifurcation_reach"),
         (["method=cco", "tissue.bifurcation_reach=0.002"], "method=cco"),
+        (["method=cco", "tissue.bifurcations_in_cavities=false"], "method.avoid_cavities"),
+        (["tissue.bifurcations_in_cavities=maybe"], "tissue.bifurcations_in_cavities"),
     ],
 )
 def test_bad_reach_is_refused_naming_the_field(overrides, message):
     with pytest.raises(ConfigError, match=message):
         validate(to_run_config(compose(overrides)))
+
+
+def test_without_cavities_no_bifurcation_starts_or_moves_into_a_ventricle():
+    steps = 300_000
+    overrides = ("tissue=heart", "n_terminals=120", *COLD, f"anneal.steps={steps}")
+    problem = make_problem(*overrides, "tissue.bifurcation_reach=0", "tissue.bifurcations_in_cavities=false")
+    tissue, region = problem.tissue, problem.model.bifurcation_region
+    np.testing.assert_array_equal(region, tissue.bifurcation_region(0.0) & ~tissue.cavity)
+    assert tissue.cavity.any()
+    # The random start puts a bifurcation at its terminals' mean: most of them inside a ventricle
+    # (90 of 118 here); with the cavities left out they start on the heart's wall.
+    allowed = make_problem(*overrides, "tissue.bifurcation_reach=0")
+    start = bifurcation_positions(allowed, engine.initial_state(allowed, seed=2))
+    assert tissue.contains(start, tissue.cavity.astype(np.uint8)).mean() > 0.5
+    state = engine.initial_state(problem, seed=2)
+    engine.run_block(problem, state, steps)
+    assert_moves_of_every_kind_accepted_and_rejected(state)
+    at = bifurcation_positions(problem, state)
+    assert tissue.contains(at, region).all() and not tissue.contains(at, tissue.cavity.astype(np.uint8)).any()
+    assert_running_equals_full(problem, state)
+    # With the reach unset the region is the whole box but the cavities.
+    anywhere = make_problem(*overrides, "tissue.bifurcations_in_cavities=false").model.bifurcation_region
+    np.testing.assert_array_equal(anywhere, (~tissue.cavity).astype(np.uint8))
+
+
+def test_cavities_allowed_is_the_run_before_the_key():
+    with_key = make_problem("tissue=heart", "n_terminals=60", "tissue.bifurcations_in_cavities=true")
+    without = make_problem("tissue=heart", "n_terminals=60")
+    assert with_key.model.bifurcation_region.shape == without.model.bifurcation_region.shape == (0, 0, 0)

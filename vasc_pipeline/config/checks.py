@@ -289,6 +289,11 @@ def _validate_method(cfg: RunConfig) -> None:
             "tissue.bifurcation_reach confines the anneal's bifurcations; the CCO growth (method=cco) "
             "places them at their optimum: leave it unset (null) there"
         )
+    if not tissue.bifurcations_in_cavities and name == "cco":
+        raise ConfigError(
+            "tissue.bifurcations_in_cavities=false confines the anneal's bifurcations; the CCO growth "
+            "(method=cco) keeps its segments out of cavities with method.avoid_cavities=true instead"
+        )
     if cfg.anneal.parts > 1 and name != "anneal":
         raise ConfigError(f"anneal.parts={cfg.anneal.parts} applies to method=anneal only, got method={name}")
 

@@ -195,6 +195,7 @@ def config_differences(
 # the terminals by connection).
 ANNEAL_TISSUE_KEYS = (
     "tissue.bifurcation_reach",
+    "tissue.bifurcations_in_cavities",
     "tissue.inlet_share",
     "tissue.inlet_share_tolerance",
     "tissue.inlet_assignment",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from .keyspec import (
+    BOOLEAN,
     EVERY,
     Key,
     OneOf,
@@ -114,6 +115,17 @@ TISSUE_KEYS: tuple[Key, ...] = (
         default="anneal: 0 (`model=physiological`); `model=paper`: {}, anywhere in the grid's box",
         accepted="{} (0: on or in the exclusion domain); not with `method=cco`",
         check=Range(0, null=True, says="be a length >= 0 in metres, or null"),
+        tissues=EVERY,
+    ),
+    Key(
+        "tissue.bifurcations_in_cavities",
+        "–",
+        (
+            "false: no bifurcation inside a cavity (the exclusion domain outside the tissue: a "
+            "ventricle's blood pool) ([Where bifurcations may lie](model.md#where-bifurcations-may-lie))"
+        ),
+        accepted="{}; not with `method=cco`",
+        check=BOOLEAN,
         tissues=EVERY,
     ),
     Key(

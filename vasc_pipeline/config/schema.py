@@ -83,6 +83,7 @@ KEYS_ADDED_LATER: dict[str, Any] = {
     "tissue.inlet_share_tolerance": None,
     "tissue.inlet_assignment": "random",
     "tissue.bifurcation_reach": None,
+    "tissue.bifurcations_in_cavities": True,
     "tissue.ostium_height": None,
     "tissue.base_cut": None,
     "tissue.elongation": None,
@@ -127,6 +128,7 @@ TISSUE_KEYS_OF_EVERY_TISSUE = (
     "inlet_share_tolerance",
     "inlet_assignment",
     "bifurcation_reach",
+    "bifurcations_in_cavities",
     "inlets",
     "inlets_path",
     "organ",
@@ -192,6 +194,9 @@ class TissueConfig(Settings):
     # How far outside the exclusion domain a bifurcation may lie, m (0: in it, e.g. on the
     # heart); None: anywhere in the voxel grid's box (the paper).
     bifurcation_reach: Optional[float] = None
+    # False: no bifurcation inside a cavity of the exclusion domain (a ventricle's blood pool);
+    # True: anywhere the reach allows (the paper).
+    bifurcations_in_cavities: bool = True
     # What organ the tissue is: "heart" (the reduction compares the trees with Kassab's pig coronary
     # arteries) or "other" (it does not); None: organ_of decides (a mask with one inlet is "other").
     # Read by the reduction only: the tree does not depend on it.

@@ -164,6 +164,20 @@ def _physics(cfg: RunConfig, tissue: Tissue) -> Physics:
     )
 
 
+def _bifurcation_region(t, tissue: Tissue) -> np.ndarray:
+    """uint8 grid of where bifurcations may lie (``tissue.bifurcation_reach``, less the cavities
+    with ``tissue.bifurcations_in_cavities=false``); shape (0, 0, 0): anywhere in the box."""
+    if t.bifurcation_reach is None and t.bifurcations_in_cavities:
+        return np.zeros((0, 0, 0), dtype=np.uint8)
+    if t.bifurcation_reach is None:
+        region = np.ones(tissue.mask.shape, dtype=np.uint8)
+    else:
+        region = tissue.bifurcation_region(t.bifurcation_reach)
+    if not t.bifurcations_in_cavities:
+        region[tissue.cavity] = 0
+    return region
+
+
 def _neighbour_cells(a, physics: Physics, tissue: Tissue) -> tuple[float, np.ndarray]:
     """(cell size [m], cell shape) of the local swap partners' neighbour cells (at most 2e7 cells)."""
     lo, hi = tissue.bounds
@@ -244,11 +258,7 @@ def _kernel_model(cfg: RunConfig, tissue: Tissue, physics: Physics, terms, sched
         prefetch_supply=True,
         fixed_inlet_counts=cfg.tissue.inlet_share is not None and cfg.tissue.inlet_share_tolerance is None,
         inlet_count_bounds=inlet_count_bounds(cfg.tissue.inlet_share, cfg.tissue.inlet_share_tolerance, n),
-        bifurcation_region=(
-            np.zeros((0, 0, 0), dtype=np.uint8)
-            if cfg.tissue.bifurcation_reach is None
-            else tissue.bifurcation_region(cfg.tissue.bifurcation_reach)
-        ),
+        bifurcation_region=_bifurcation_region(cfg.tissue, tissue),
         supply_target=(
             np.zeros((0, 0, 0), dtype=np.uint8)
             if tissue.supply_target is None
