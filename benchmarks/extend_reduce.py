@@ -74,7 +74,7 @@ def reduce_it(out: str, zerod: str) -> None:
     from vasc_pipeline.store.extended import ExtendedStore
 
     (store,) = extended_stores(out)[0]
-    gamma = ExtendedStore.open(store).attrs["physics"]["gamma"]
+    physics = ExtendedStore.open(store).attrs["physics"]
     summary = result.summary
     anatomy = summary["anatomy"].to_dataset().sel(run_id=run_id)
     morph = summary["morphometry"].to_dataset().sel(run_id=run_id, reading="range", scheme="diameter_defined")
@@ -83,7 +83,8 @@ def reduce_it(out: str, zerod: str) -> None:
     orders = [int(o) for o in morph.order.values if int(morph.element_count.sel(order=o)) > 0]
     row = {
         "run_id": run_id,
-        "gamma": gamma,
+        "gamma": physics["gamma"],
+        "viscosity_law": physics.get("viscosity_law", "constant"),
         "zerod": zerod,
         "n_terminals": int(anatomy.n_fine_terminals),
         "n_territories": int(anatomy.n_territories),
