@@ -109,3 +109,20 @@ def test_a_sigterm_while_compiling_ends_the_wait(monkeypatch):
     assert terminated == [signal.SIGTERM]
     assert interrupted and not finished.is_set()
     finished.wait(5)  # let the stand-in end before the next test
+
+
+def test_the_warm_up_leaves_the_regraft_descent_out(monkeypatch):
+    """The warm-up compiles; the regraft descent compiles nothing and, on a tree of a few moves,
+    would regraft nearly every terminal (it took over ten minutes at N = 6000)."""
+    import importlib
+
+    from vasc_pipeline import config, engine, sweep
+
+    run_module = importlib.import_module("vasc_pipeline.engine.run")
+    calls = []
+    monkeypatch.setattr(run_module, "descend_regrafts", lambda *args, **kwargs: calls.append(1) or 0)
+    (job,) = sweep.expand(config.compose([*TINY_RUN, "anneal.polish_regrafts=true", "anneal.steps=3000"]))
+    warmup._warm_up_jobs([job])
+    assert calls == []
+    engine.run(job.run_config(), seed=0)  # the job itself does run it
+    assert calls == [1]

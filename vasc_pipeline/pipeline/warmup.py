@@ -107,7 +107,9 @@ def _warm_up_jobs(jobs: list[Job]) -> None:
                 grow(engine.build_problem(cfg), 0)
                 continue
             steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
-            few_moves = replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64))
+            # The regraft descent is plain Python (nothing to compile), and on a tree of a few
+            # moves it would regraft nearly every terminal: half an hour at N = 6000.
+            few_moves = replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64, polish_regrafts=False))
             result = engine.run(few_moves, seed=int(cfg.seed))
             _warm_up_translation(result)
         except Exception:  # the job itself fails the same way, and its run reports it
