@@ -111,21 +111,26 @@ def _warm_up_jobs(jobs: list[Job]) -> None:
             # moves it would regraft nearly every terminal: half an hour at N = 6000.
             few_moves = replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64, polish_regrafts=False))
             result = engine.run(few_moves, seed=int(cfg.seed))
-            _warm_up_translation(result)
+            _warm_up_polish(result)
         except Exception:  # the job itself fails the same way, and its run reports it
             continue
 
 
-def _warm_up_translation(result: Any) -> None:
+def _warm_up_polish(result: Any) -> None:
     """The polish's single translations (``kernel.translate_node``): a run of a few moves is
-    usually polished in one piece and never calls them, a real run often does."""
+    usually polished in one piece and never calls them, a real run often does. And the regraft
+    descent's calls (``legal_position``, ``segment_exclusion``), left out of the warm-up's run."""
     from .. import engine, kernel
+    from ..kernel.exclusion import segment_exclusion
+    from ..kernel.moves import legal_position
     from ..model.rng import seed_state
 
     problem = result.problem
     state = engine.state_from_tree(problem, result.tree, seed_state(0))
     node = problem.model.n_inlets  # any node that may move; moved onto itself
     kernel.translate_node(problem.model, state, node, state.position[node].copy(), 1e-300)
+    segment_exclusion(problem.model, state.position[node], state.position[state.parent[node]])
+    legal_position(problem.model, False, state.position[node].copy())
 
 
 def _warm_up_generic() -> None:
