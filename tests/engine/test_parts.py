@@ -160,6 +160,7 @@ def test_bad_parts_settings_name_the_field(overrides, message):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # ~50 s; the parts' own tests run in the default suite
 def test_a_sweep_runs_one_tree_in_parts_on_the_clusters_workers(tmp_path):
     """Through the pipeline, on a local cluster of two workers: the runs go one at a time, their
     parts to the workers, progress names the phase, and each tree is the one the same run

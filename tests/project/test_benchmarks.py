@@ -30,7 +30,16 @@ def test_benchmarks_are_found():
     assert {"kernel_profile.py", "kernel_throughput.py"} <= {p.name for p in BENCHMARKS}
 
 
-@pytest.mark.parametrize("script", BENCHMARKS, ids=[p.stem for p in BENCHMARKS])
+# The whole tree's two instruments grow and reduce a tree even in quick mode (20-25 s each):
+# run with -m slow, as the extension's own tests cover the code they call.
+SLOW_QUICK_MODES = ("extend_reduce", "extend_scaling")
+
+
+@pytest.mark.parametrize(
+    "script",
+    [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_QUICK_MODES else p for p in BENCHMARKS],
+    ids=[p.stem for p in BENCHMARKS],
+)
 def test_benchmark_runs_in_quick_mode(script, tmp_path):
     lines = run_benchmark(script.name, "--quick", cwd=tmp_path).stdout.splitlines()
     assert lines, "a benchmark prints its figures"

@@ -51,6 +51,7 @@ def assert_collected(paper: Path, run_ids: list[str]) -> None:
     assert not any(paper.glob("runs"))  # the run stores stay in RUNS_DIR
 
 
+@pytest.mark.slow  # a real sweep, ~25 s; the other study scripts' wiring runs in the default suite
 def test_size_scan_runs_the_sweep_then_collects_its_small_outputs(tmp_path):
     done = study("size_scan.sh", tmp_path, "local", "sweep.n_terminals=[12,16]", *TINY)
     assert done.returncode == 0, done.stdout + done.stderr
