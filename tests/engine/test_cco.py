@@ -313,6 +313,7 @@ def test_anneal_init_cco_starts_from_the_cco_tree():
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # ~25 s; the CCO growth and its reduction have unit tests in the default suite
 def test_pipeline_with_cco_then_reduction_with_both_methods(tmp_path):
     out = tmp_path / "both"
     grid = [

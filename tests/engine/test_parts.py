@@ -132,6 +132,7 @@ def test_parts_of_one_is_the_serial_anneal():
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # ~19 s; a parts run independent of how its parts run stays in the default suite
 def test_a_killed_parts_run_resumes_to_the_same_tree(tmp_path):
     overrides = [
         *SPHERE,

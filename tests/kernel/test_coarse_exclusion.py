@@ -113,6 +113,7 @@ def test_block_splits_and_checkpoint_round_trips_across_the_switch_are_bit_ident
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # ~18 s; the sweep-level SIGKILL test resumes in the default suite
 def test_a_run_killed_in_the_coarse_part_resumes_bit_identically(tmp_path):
     overrides = [
         "tissue=sphere",

@@ -86,6 +86,7 @@ def test_block_splits_and_checkpoint_round_trips_across_the_phase_are_bit_identi
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # ~20 s; the sweep-level SIGKILL test resumes in the default suite
 def test_a_run_killed_during_the_phase_resumes_bit_identically(tmp_path):
     overrides = [
         "tissue=sphere",

@@ -215,6 +215,7 @@ def test_a_killed_worker_resumes_its_job_from_the_checkpoint(tmp_path):
 # -- an existing scheduler -------------------------------------------------------------------
 
 
+@pytest.mark.slow  # ~20 s; the local cluster and Slurm paths stay in the default suite
 def test_an_existing_scheduler_by_address_gives_the_same_results(tmp_path):
     from distributed import Client
 

@@ -579,6 +579,7 @@ def _resumable_work(progress: str, units: int) -> int:
     return done
 
 
+@pytest.mark.slow  # ~21 s
 def test_10_a_task_whose_worker_retires_resumes_on_a_new_worker_without_counting_as_a_failure(tmp_path):
     """What cluster=slurm relies on (cluster.worker_lifetime): a worker retiring at its
     --lifetime is not a failure (allowed-failures 0 here), and adaptive scaling with
