@@ -228,24 +228,35 @@ def _check_labels(labels: LabelsConfig) -> None:
 
 def _check_segment_costs(cfg: RunConfig) -> None:
     """Every segment's radius, Poiseuille resistance, power and volume cost (n = 1..N terminals
-    downstream, r = r_in (n / N)^(1/gamma)) must be a finite number > 0 in float64: where the
+    downstream, the model's own cost tables) must be a finite number > 0 in float64: where the
     physics parameters together leave that range, the model is not defined (and the flow
     solve fails far from the setting that caused it)."""
     import numpy as np
 
-    from ..model.physics import relative_viscosity
+    from ..model.physics import TABLE_POWER, TABLE_RESISTANCE, TABLE_VOLUME, Physics, segment_factors
 
     p = cfg.physics
-    n = np.arange(1, cfg.n_terminals + 1, dtype=np.float64)
+    physics = Physics(
+        n_terminals=cfg.n_terminals,
+        n_inlets=1,
+        gamma=p.gamma,
+        inlet_radius=p.inlet_radius,
+        total_flow=p.total_flow,
+        m_b=p.m_b,
+        viscosity=p.viscosity,
+        supply_radius=0.0,  # not read by the tables
+        viscosity_law=p.viscosity_law,
+    )
+    n = np.arange(1, cfg.n_terminals + 1)
     with np.errstate(all="ignore"):
-        r = p.inlet_radius * (n / cfg.n_terminals) ** (1.0 / p.gamma)
-        resistance = 8.0 * p.viscosity * relative_viscosity(2.0 * r, p.viscosity_law) / (math.pi * r**4)
-        parts = {
-            "radius": r,
-            "resistance": resistance,
-            "power": (n * p.total_flow / cfg.n_terminals) ** 2 * resistance,
-            "volume cost": p.m_b * math.pi * r**2,
-        }
+        r = physics.radius(n)
+        factors = segment_factors(physics, n)
+    parts = {
+        "radius": r,
+        "resistance": factors[TABLE_RESISTANCE],
+        "power": factors[TABLE_POWER],
+        "volume cost": factors[TABLE_VOLUME],
+    }
     for what, values in parts.items():
         if not (np.all(np.isfinite(values)) and np.all(values > 0)):
             raise ConfigError(
