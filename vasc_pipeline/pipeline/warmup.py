@@ -108,7 +108,7 @@ def _warm_up_jobs(jobs: list[Job]) -> None:
                 continue
             steps = _config.packing_steps(cfg) + 256  # every phase of the schedule, a few moves each
             # The regraft descent is plain Python (nothing to compile), and on a tree of a few
-            # moves it would regraft nearly every terminal: half an hour at N = 6000.
+            # moves it would regraft nearly every terminal: over ten minutes at N = 6000.
             few_moves = replace(cfg, anneal=replace(cfg.anneal, steps=steps, trace_every=64, polish_regrafts=False))
             result = engine.run(few_moves, seed=int(cfg.seed))
             _warm_up_polish(result)
