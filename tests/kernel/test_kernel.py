@@ -5,6 +5,7 @@ import pytest
 from helpers import (
     TRUE_EXCLUSION_MAP,
     ancestors,
+    assert_block_splits_bit_identical,
     assert_moves_of_every_kind_accepted_and_rejected,
     assert_running_equals_full,
     make_problem,
@@ -13,7 +14,7 @@ from helpers import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasc_pipeline import engine, kernel, physics
+from vasc_pipeline import costs, engine, kernel, physics
 from vasc_pipeline.model.tree import count_terminals
 
 COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, cold enough to reject
@@ -35,8 +36,11 @@ COLD = ("anneal.T_start=1e-2", "anneal.T_end=1e-9")  # W: hot enough to accept, 
             "physics.r_cutoff_ramp=2e-4",
             "physics.viscosity_law=pries_in_vivo",
         ),
+        # the terminal-pressure term, weighted to matter: ΔC_p of translations and of swaps
+        # within and between the inlet trees
+        ("tissue=heart", "n_terminals=120", "physics.A_p=1e-5"),
     ],
-    ids=["plane2d", "sphere", "box", "heart", "heart-ramp-viscosity"],
+    ids=["plane2d", "sphere", "box", "heart", "heart-ramp-viscosity", "heart-pressure"],
 )
 def test_running_sums_equal_full_recomputation_after_a_million_moves(overrides):
     steps = 1_000_000
@@ -60,6 +64,42 @@ def test_pressure_term_incremental_when_enabled():
     assert_moves_of_every_kind_accepted_and_rejected(state)
     running = assert_running_equals_full(problem, state)
     assert running["pressure"] > 0
+
+
+def test_pressure_change_of_every_move_equals_full_recomputation():
+    """ΔC_p from the pressures along the move's paths and the drop moments of the subtrees
+    that shift (below a translated node; the moved subtrees and those hanging off a swap's
+    paths, within an inlet tree or between two): after each accepted move the running C_p
+    equals a fresh sum over the whole tree, whatever the move's reach."""
+    problem = make_problem("tissue=heart", "n_terminals=80", "physics.A_p=1e-5", "anneal.steps=10")
+    model = problem.model
+    state = engine.initial_state(problem, seed=7)
+    rng = np.random.default_rng(0)
+    k, n = model.n_inlets, model.n_terminals
+    between_inlets = within_tree = 0
+    for _ in range(400):
+        if rng.random() < 0.5:
+            a, b = rng.choice(np.arange(k, state.parent.size), size=2, replace=False)
+            inlet_a, inlet_b = (ancestors(state.parent, x)[-1] for x in (a, b))
+            outcome = kernel.swap_nodes(model, state, a, b, 1e300)
+            between_inlets += outcome == kernel.ACCEPTED and inlet_a != inlet_b
+            within_tree += outcome == kernel.ACCEPTED and inlet_a == inlet_b
+        else:
+            i = rng.integers(k + n, state.parent.size)  # a bifurcation: three segments change
+            new = state.position[i] + rng.uniform(-2e-3, 2e-3, 3)
+            outcome = kernel.translate_node(model, state, i, new, 1e300)
+        if outcome == kernel.ACCEPTED:
+            expected = kernel.pressure_cost(model, state)
+            assert state.costs[kernel.PRESSURE] + state.compensation[kernel.PRESSURE] == pytest.approx(
+                expected, rel=1e-12
+            )
+    assert between_inlets > 5 and within_tree > 5
+    moments = state.scratch_drop_moment.copy()  # updated move by move: a fresh pass's, to the bit
+    kernel.pressure_moments(model, state)
+    np.testing.assert_array_equal(state.scratch_drop_moment, moments)
+    terminal_pressures = costs.node_pressures(engine.tree_of(problem, state), problem.physics)[k : k + n]
+    reference = np.sum((terminal_pressures - problem.physics.pressure_terminal) ** 2)
+    assert engine.running_costs(problem, state)["pressure"] == pytest.approx(reference, rel=1e-9)
 
 
 def test_fixed_terminals_never_move_and_supply_is_off(tmp_path):
@@ -102,6 +142,12 @@ def test_same_config_and_seed_give_identical_trees_and_block_splits_are_bit_iden
     other = engine.initial_state(problem, seed=10)
     engine.run_block(problem, other, 300_000)
     assert not np.array_equal(one.position, other.position)
+
+
+def test_block_splits_with_the_pressure_term_are_bit_identical():
+    # The drop moments are not checkpointed: a restored state rebuilds them, to the bit.
+    problem = make_problem("tissue=heart", "n_terminals=60", "physics.A_p=1e-5", *COLD, "anneal.steps=200000")
+    assert_block_splits_bit_identical(problem, 6, (1, 49_999, 70_000, 80_000))
 
 
 # --- swap legality -------------------------------------------------------------------
@@ -193,8 +239,12 @@ def test_supply_map_is_int16_and_int32_checkpoints_resume_bit_identically():
 
 @pytest.mark.parametrize(
     "overrides",
-    [("tissue=sphere", "n_terminals=60"), ("tissue=heart", "n_terminals=60")],
-    ids=["sphere", "heart"],
+    [
+        ("tissue=sphere", "n_terminals=60"),
+        ("tissue=heart", "n_terminals=60"),
+        ("tissue=heart", "n_terminals=60", "physics.A_p=1e-5"),  # ΔC_p in every bound
+    ],
+    ids=["sphere", "heart", "heart-pressure"],
 )
 def test_early_rejection_changes_no_decision(overrides):
     """The early-rejection shortcut skips work only: same states, bit for bit, without it."""
@@ -202,7 +252,7 @@ def test_early_rejection_changes_no_decision(overrides):
 
     steps = 200_000
     problem = make_problem(*overrides, *COLD, f"anneal.steps={steps}")
-    assert problem.model.early_reject and problem.terms.exclusion and not problem.terms.pressure
+    assert problem.model.early_reject and problem.terms.exclusion
     final = {}
     for early in (True, False):
         p = dataclasses.replace(problem, model=problem.model._replace(early_reject=early))
@@ -230,7 +280,7 @@ def test_new_segment_traversal_rejects_on_its_partial_sum_or_traverses_in_full()
     temp, u = 1e-12, 0.5  # cap = T ln 2 / slope: a tiny fraction of the sum
     for vascular, rejected in ((1e-9, True), (-1e300, False)):
         s, was_rejected, u_out = kernel.moves._new_exclusion(
-            model, p0, p1, n, temp, rng, u, 0.0, vascular, 0.0, 0.0, 0.0, 0.0, 0.0, False
+            model, p0, p1, n, temp, rng, u, 0.0, vascular, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
         )
         assert was_rejected == rejected and u_out == u
         assert (0 < s < full) if rejected else (s == full)

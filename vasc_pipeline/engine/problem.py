@@ -431,11 +431,12 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray], n_terminals: 
     dtypes = {name: _STATE_INT64.get(name, np.float64) for name in CHECKPOINT_FIELDS}
     dtypes["supply"] = supply_dtype(problem.physics.n_terminals)  # a part's is the whole tree's map
     fields = {name: np.ascontiguousarray(arrays[name], dtype=dtypes[name]).copy() for name in CHECKPOINT_FIELDS}
-    return kernel.State(
+    state = kernel.State(
         **fields,
         scratch_mark=np.zeros(m, dtype=np.int64),
         scratch_stack=np.zeros(m, dtype=np.int64),
         scratch_pressure=np.zeros(m),
+        scratch_drop_moment=np.zeros(m),
         scratch_cell_count=np.bincount(
             fields["cell_of"][fields["cell_of"] >= 0], minlength=int(np.prod(problem.model.cell_shape))
         ).astype(np.int64),
@@ -445,3 +446,6 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray], n_terminals: 
         scratch_shell_bands=np.zeros((n, kernel.SHELL_BANDS), dtype=np.int64),
         scratch_shell_frame=np.zeros((n, 4)),
     )
+    if problem.model.pressure_on:
+        kernel.pressure_moments(problem.model, state)
+    return state

@@ -64,6 +64,7 @@ from .moves import (
 )
 from .pressure import (
     pressure_cost,
+    pressure_moments,
 )
 from .schedule import (
     supply_weight,
@@ -163,6 +164,7 @@ __all__ = [
     "supply_move_delta",
     "supply_sphere",
     "pressure_cost",
+    "pressure_moments",
     "build_cells",
     "neighbour_partner",
     "legal_position",

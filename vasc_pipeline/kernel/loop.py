@@ -15,7 +15,7 @@ from ..model.rng import next_below, next_double
 from .cells import build_cells
 from .exclusion import _distance3, recompute_exclusion
 from .moves import _adapt_step, _translate_node, _translation
-from .pressure import pressure_cost
+from .pressure import pressure_cost, pressure_moments
 from .schedule import temperature, weighted_total
 from .state import ACCEPTED, COUNTER_STEP, EXCLUSION, ILLEGAL, POWER, PRESSURE, SUPPLY, VOLUME, _add
 from .supply import supply_sphere
@@ -51,6 +51,7 @@ def initialise(model, state):
             c_s += supply_sphere(model, supply, state.position[t], 1)
         state.costs[SUPPLY] = c_s
     if model.pressure_on:
+        pressure_moments(model, state)
         state.costs[PRESSURE] = pressure_cost(model, state)
 
 

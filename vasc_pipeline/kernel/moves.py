@@ -16,7 +16,7 @@ from ..model.physics import TABLE_EXCLUSION, TABLE_POWER, TABLE_VOLUME
 from ..model.rng import next_below, next_double
 from .cells import _cell_update
 from .exclusion import _distance3, segment_exclusion, segment_exclusion_capped
-from .pressure import _pressure_with_lengths
+from .pressure import _translation_pressure_change, update_moments
 from .schedule import _accept_with, _bounds_apply, _early_reject, _tree_step, supply_weight, weighted_total
 from .state import (
     ACCEPTED,
@@ -58,7 +58,7 @@ def _exclusion_cap(model, temp, u, bound, n):
 
 
 @jit_norc_inline
-def _new_exclusion(model, p0, p1, n, temp, rng, u, bound, vascular, pre, mid, old_exc, w_sup, d_sup, swap):
+def _new_exclusion(model, p0, p1, n, temp, rng, u, bound, vascular, pre, mid, old_exc, d_pre, w_sup, d_sup, swap):
     """Traversal sum of a move's new segment p0 -> p1 (n terminals downstream), or a rejection.
 
     The traversal stops once its sum passes :func:`_exclusion_cap`; the move is then checked
@@ -67,15 +67,15 @@ def _new_exclusion(model, p0, p1, n, temp, rng, u, bound, vascular, pre, mid, ol
     for a translation, pre + ((mid + x) - old_exc) for a swap (``swap``), x this segment's
     cost, ``mid`` the new segments' costs before it that the final sum groups with it,
     ``pre`` the others, later new segments at 0. If the bound does not reject, the full sum
-    is traversed. ``bound``: ΔC with this and later new segments at 0. Returns
-    (sum, rejected, u), ``u`` as in :func:`_early_reject`.
+    is traversed. ``bound``: ΔC with this and later new segments at 0; ``d_pre``: the move's
+    ΔC_p. Returns (sum, rejected, u), ``u`` as in :func:`_early_reject`.
     """
     cap = _exclusion_cap(model, temp, u, bound, n)
     s = segment_exclusion_capped(model, p0, p1, cap)
     if s > cap:
         x = _exclusion_cost(model, n, s)
         d_exc = pre + ((mid + x) - old_exc) if swap else (pre + (mid + x)) - old_exc
-        rejected, u = _early_reject(weighted_total(model, vascular, d_exc, 0.0, w_sup, d_sup), temp, rng, u)
+        rejected, u = _early_reject(weighted_total(model, vascular, d_exc, d_pre, w_sup, d_sup), temp, rng, u)
         if rejected:
             return s, True, u
         s = segment_exclusion(model, p0, p1)
@@ -232,13 +232,17 @@ def _translate_node(model, state, i, new, temp):
         reach = _shell_reach(model, state, t, ox, oy, oz, px, py, pz)
         d_sup = _terminal_supply_change(model, state, t, ox, oy, oz, px, py, pz, reach, False)
     w_sup = supply_weight(model, state, temp) if d_sup != 0.0 else model.w_supply
+    # pressure: exact, and cheap next to the exclusion, so it enters every bound
+    d_pre = 0.0
+    if model.pressure_on:
+        d_pre = _translation_pressure_change(model, state, i, len_i, c0, len_c0, c1, len_c1)
     # early rejection on a lower bound
     u = -1.0
     check = _bounds_apply(model)
     vascular = d_vol + d_pow
     bound = 0.0
     if check:
-        bound = weighted_total(model, vascular, -old_exc, 0.0, w_sup, d_sup)  # new exclusion taken as 0
+        bound = weighted_total(model, vascular, -old_exc, d_pre, w_sup, d_sup)  # new exclusion taken as 0
         rejected, u = _early_reject(bound, temp, rng, -1.0)
         if rejected:
             return REJECTED
@@ -251,7 +255,7 @@ def _translate_node(model, state, i, new, temp):
     if model.exclusion_on:
         n_i = state.n_downstream[i]
         exc_i, rejected, u = _new_exclusion(
-            model, new, pos[p], n_i, temp, rng, u, bound, vascular, 0.0, 0.0, old_exc, w_sup, d_sup, False
+            model, new, pos[p], n_i, temp, rng, u, bound, vascular, 0.0, 0.0, old_exc, d_pre, w_sup, d_sup, False
         )
         if rejected:
             return REJECTED
@@ -260,34 +264,58 @@ def _translate_node(model, state, i, new, temp):
             n_c0 = state.n_downstream[c0]
             n_c1 = state.n_downstream[c1]
             if check:  # the children's exclusion still taken as 0
-                bound = weighted_total(model, vascular, d_exc - old_exc, 0.0, w_sup, d_sup)
+                bound = weighted_total(model, vascular, d_exc - old_exc, d_pre, w_sup, d_sup)
                 rejected, u = _early_reject(bound, temp, rng, u)
                 if rejected:
                     return REJECTED
             exc_c0, rejected, u = _new_exclusion(
-                model, pos[c0], new, n_c0, temp, rng, u, bound, vascular, d_exc, 0.0, old_exc, w_sup, d_sup, False
+                model,
+                pos[c0],
+                new,
+                n_c0,
+                temp,
+                rng,
+                u,
+                bound,
+                vascular,
+                d_exc,
+                0.0,
+                old_exc,
+                d_pre,
+                w_sup,
+                d_sup,
+                False,
             )
             if rejected:
                 return REJECTED
             cost_c0 = _exclusion_cost(model, n_c0, exc_c0)
             if check:  # c1's exclusion still taken as 0
-                bound = weighted_total(model, vascular, (d_exc + (cost_c0 + 0.0)) - old_exc, 0.0, w_sup, d_sup)
+                bound = weighted_total(model, vascular, (d_exc + (cost_c0 + 0.0)) - old_exc, d_pre, w_sup, d_sup)
                 rejected, u = _early_reject(bound, temp, rng, u)
                 if rejected:
                     return REJECTED
             exc_c1, rejected, u = _new_exclusion(
-                model, pos[c1], new, n_c1, temp, rng, u, bound, vascular, d_exc, cost_c0, old_exc, w_sup, d_sup, False
+                model,
+                pos[c1],
+                new,
+                n_c1,
+                temp,
+                rng,
+                u,
+                bound,
+                vascular,
+                d_exc,
+                cost_c0,
+                old_exc,
+                d_pre,
+                w_sup,
+                d_sup,
+                False,
             )
             if rejected:
                 return REJECTED
             d_exc += cost_c0 + _exclusion_cost(model, n_c1, exc_c1)
         d_exc -= old_exc
-    # pressure (recomputed in full on the tentative lengths)
-    new_pressure = 0.0
-    d_pre = 0.0
-    if model.pressure_on:
-        new_pressure = _pressure_with_lengths(model, state, i, len_i, c0, len_c0, c1, len_c1)
-        d_pre = new_pressure - state.costs[PRESSURE]
     # Metropolis, then commit
     d_cost = weighted_total(model, vascular, d_exc, d_pre, w_sup, d_sup)
     if not _accept_with(d_cost, temp, rng, u):
@@ -304,12 +332,14 @@ def _translate_node(model, state, i, new, temp):
     if not is_terminal:
         _set_segment(state, c0, len_c0, exc_c0)
         _set_segment(state, c1, len_c1, exc_c1)
-    _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure)
+    if model.pressure_on:
+        update_moments(model, state, i)
+    _commit(model, state, d_vol, d_pow, d_exc, d_sup, d_pre)
     return ACCEPTED
 
 
 @jit_norc
-def _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure):
+def _commit(model, state, d_vol, d_pow, d_exc, d_sup, d_pre):
     """Add an accepted move's deltas to the running sums."""
     costs = state.costs
     comp = state.compensation
@@ -318,6 +348,5 @@ def _commit(model, state, d_vol, d_pow, d_exc, d_sup, new_pressure):
     if model.exclusion_on:
         _add(costs, comp, EXCLUSION, d_exc)
     costs[SUPPLY] += d_sup  # integer-valued: exact in float64
-    if model.pressure_on:  # recomputed in full for the move: take it as is, no drift
-        costs[PRESSURE] = new_pressure
-        comp[PRESSURE] = 0.0
+    if model.pressure_on:
+        _add(costs, comp, PRESSURE, d_pre)

@@ -98,9 +98,9 @@ def _early_reject(lower_bound, temp, rng, u):
 
 @jit_norc_inline
 def _bounds_apply(model):
-    """Whether a move is checked on lower bounds of ΔC before its dear terms (the pressure term,
-    recomputed in full, has no cheap bound; ``Model.early_reject`` False turns them off to test)."""
-    return model.early_reject and not model.pressure_on
+    """Whether a move is checked on lower bounds of ΔC before its exclusion traversals
+    (``Model.early_reject`` False turns them off to test)."""
+    return model.early_reject
 
 
 @jit_norc_inline

@@ -143,6 +143,9 @@ State = namedtuple(
         "scratch_mark",
         "scratch_stack",
         "scratch_pressure",
+        "scratch_drop_moment",  # float64 (2N,): per node, Σ over its strict descendants u of n_u times
+        # the pressure drop along u's segment [Pa] (kernel.pressure; derived from the tree, never
+        # checkpointed; filled only with the pressure term on)
         "scratch_cell_count",  # int64: nodes per neighbour cell (derived from cell_of, so never checkpointed)
         "scratch_shell_voxels",  # int16 (N, shell_capacity, 3) [x, y, z]: per terminal, the tissue voxels
         # near its supply sphere's surface (_shell_build; derived from positions, never checkpointed)

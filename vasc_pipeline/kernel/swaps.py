@@ -13,7 +13,7 @@ from ..model.rng import next_below, next_double
 from .cells import neighbour_partner
 from .exclusion import _distance3
 from .moves import _commit, _exclusion_cost, _new_exclusion, _segment_change, _segment_exclusion_cost, _set_segment
-from .pressure import _pressure_with_lengths
+from .pressure import _swap_pressure_change, update_moments
 from .schedule import _accept_with, _bounds_apply, _early_reject, weighted_total
 from .state import (
     ACCEPTED,
@@ -21,7 +21,6 @@ from .state import (
     COUNTER_SWAP_ACCEPTED,
     COUNTER_SWAP_PROPOSED,
     ILLEGAL,
-    PRESSURE,
     REJECTED,
 )
 
@@ -186,13 +185,17 @@ def _swap_nodes(model, state, a, b, temp):
     d_vol += va + vb
     d_pow += wa + wb
     old_exc = _segment_exclusion_cost(model, state, a) + _segment_exclusion_cost(model, state, b)
+    # pressure: exact, and cheap next to the exclusion, so it enters every bound
+    d_pre = 0.0
+    if model.pressure_on:
+        d_pre = _swap_pressure_change(model, state, a, b, lca, new_len_a, new_len_b)
     # early rejection on a lower bound (new segments' exclusion taken as 0)
     u = -1.0
     check = _bounds_apply(model)
     vascular = d_vol + d_pow
     bound = 0.0
     if check:
-        bound = weighted_total(model, vascular, d_exc - old_exc, 0.0, 0.0, 0.0)
+        bound = weighted_total(model, vascular, d_exc - old_exc, d_pre, 0.0, 0.0)
         rejected, u = _early_reject(bound, temp, rng, -1.0)
         if rejected:
             return REJECTED
@@ -201,30 +204,22 @@ def _swap_nodes(model, state, a, b, temp):
     new_exc_b = 0.0
     if model.exclusion_on:
         new_exc_a, rejected, u = _new_exclusion(
-            model, pos[a], pos[pb], na, temp, rng, u, bound, vascular, d_exc, 0.0, old_exc, 0.0, 0.0, True
+            model, pos[a], pos[pb], na, temp, rng, u, bound, vascular, d_exc, 0.0, old_exc, d_pre, 0.0, 0.0, True
         )
         if rejected:
             return REJECTED
         cost_a = _exclusion_cost(model, na, new_exc_a)
         if check:  # b's new exclusion still taken as 0
-            bound = weighted_total(model, vascular, d_exc + (cost_a - old_exc), 0.0, 0.0, 0.0)
+            bound = weighted_total(model, vascular, d_exc + (cost_a - old_exc), d_pre, 0.0, 0.0)
             rejected, u = _early_reject(bound, temp, rng, u)
             if rejected:
                 return REJECTED
         new_exc_b, rejected, u = _new_exclusion(
-            model, pos[b], pos[pa], nb, temp, rng, u, bound, vascular, d_exc, cost_a, old_exc, 0.0, 0.0, True
+            model, pos[b], pos[pa], nb, temp, rng, u, bound, vascular, d_exc, cost_a, old_exc, d_pre, 0.0, 0.0, True
         )
         if rejected:
             return REJECTED
         d_exc += (cost_a + _exclusion_cost(model, nb, new_exc_b)) - old_exc
-    # pressure (recomputed in full on the tentatively swapped tree)
-    d_pre = 0.0
-    new_pressure = 0.0
-    if model.pressure_on:
-        _exchange_parents(state, a, b, lca)
-        new_pressure = _pressure_with_lengths(model, state, a, new_len_a, b, new_len_b, -1, 0.0)
-        _exchange_parents(state, a, b, lca)
-        d_pre = new_pressure - state.costs[PRESSURE]
     # Metropolis, then commit
     d_cost = weighted_total(model, vascular, d_exc, d_pre, 0.0, 0.0)  # a swap leaves C_s alone
     if not _accept_with(d_cost, temp, rng, u):
@@ -233,5 +228,8 @@ def _swap_nodes(model, state, a, b, temp):
     _exchange_parents(state, a, b, lca)
     _set_segment(state, a, new_len_a, new_exc_a)
     _set_segment(state, b, new_len_b, new_exc_b)
-    _commit(model, state, d_vol, d_pow, d_exc, 0.0, new_pressure)
+    if model.pressure_on:
+        update_moments(model, state, pa)
+        update_moments(model, state, pb)
+    _commit(model, state, d_vol, d_pow, d_exc, 0.0, d_pre)
     return ACCEPTED
