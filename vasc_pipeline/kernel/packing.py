@@ -40,6 +40,7 @@ from .state import (
     ILLEGAL,
     REJECTED,
     SUPPLY,
+    _breadth_first,
 )
 from .supply import in_tissue, supply_move, supply_move_delta
 
@@ -89,19 +90,8 @@ def _pack_move(model, state, temp, new):
 @jit
 def end_packing(model, state):
     """Bifurcations to the means of their children (bottom-up) where that is legal, then every cache rebuilt."""
-    order = state.scratch_stack  # breadth-first from the inlets; reversed, children come first
-    n = 0
-    for r in range(model.n_inlets):
-        order[n] = r
-        n += 1
-    head = 0
-    while head < n:
-        node = order[head]
-        head += 1
-        for c in state.children[node]:
-            if c >= 0:
-                order[n] = c
-                n += 1
+    n = _breadth_first(model, state)
+    order = state.scratch_stack
     first_bif = model.n_inlets + model.n_terminals
     pos = state.position
     for idx in range(n - 1, -1, -1):

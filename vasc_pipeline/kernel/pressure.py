@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from .._jit import jit_norc, jit_norc_inline
 from ..model.physics import TABLE_FLOW, TABLE_RESISTANCE
+from .state import _breadth_first
 
 __all__ = [
     "pressure_cost",
@@ -58,20 +59,8 @@ def pressure_cost(model, state):
 @jit_norc
 def pressure_moments(model, state):
     """Fill scratch_drop_moment for every node, children before parents (O(N))."""
-    order = state.scratch_stack  # breadth-first from the inlets; reversed, children come first
-    m = 0
-    for k in range(model.n_inlets):
-        order[m] = k
-        m += 1
-    head = 0
-    while head < m:
-        x = order[head]
-        head += 1
-        for s in range(2):
-            c = state.children[x, s]
-            if c >= 0:
-                order[m] = c
-                m += 1
+    m = _breadth_first(model, state)
+    order = state.scratch_stack
     for j in range(m - 1, -1, -1):
         x = order[j]
         state.scratch_drop_moment[x] = _moment(model, state, x)

@@ -204,3 +204,24 @@ def _add(costs, compensation, k, x):
     else:
         compensation[k] += (x - t) + s
     costs[k] = t
+
+
+@jit_norc_inline
+def _breadth_first(model, state):
+    """Every node breadth-first from the inlets into scratch_stack (reversed, children come
+    before their parents); returns how many."""
+    order = state.scratch_stack
+    n = 0
+    for r in range(model.n_inlets):
+        order[n] = r
+        n += 1
+    head = 0
+    while head < n:
+        node = order[head]
+        head += 1
+        for s in range(2):
+            c = state.children[node, s]
+            if c >= 0:
+                order[n] = c
+                n += 1
+    return n
