@@ -16,7 +16,7 @@ from ..model.physics import TABLE_EXCLUSION, TABLE_POWER, TABLE_VOLUME
 from ..model.rng import next_below, next_double
 from .cells import _cell_update
 from .exclusion import _distance3, segment_exclusion, segment_exclusion_capped
-from .pressure import _translation_pressure_change, update_moments
+from .pressure import _translation_pressure_change, _update_moments
 from .schedule import _accept_with, _bounds_apply, _early_reject, _tree_step, supply_weight, weighted_total
 from .state import (
     ACCEPTED,
@@ -333,7 +333,7 @@ def _translate_node(model, state, i, new, temp):
         _set_segment(state, c0, len_c0, exc_c0)
         _set_segment(state, c1, len_c1, exc_c1)
     if model.pressure_on:
-        update_moments(model, state, i)
+        _update_moments(model, state, i)
     _commit(model, state, d_vol, d_pow, d_exc, d_sup, d_pre)
     return ACCEPTED
 

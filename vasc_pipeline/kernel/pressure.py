@@ -23,7 +23,6 @@ from .state import _breadth_first
 __all__ = [
     "pressure_cost",
     "pressure_moments",
-    "update_moments",
 ]
 
 
@@ -90,7 +89,7 @@ def _moment(model, state, x):
 
 
 @jit_norc
-def update_moments(model, state, x):
+def _update_moments(model, state, x):
     """Recompute the moments of node x and of every node above it, after a change below x."""
     while x >= 0:
         state.scratch_drop_moment[x] = _moment(model, state, x)

@@ -13,7 +13,7 @@ from ..model.rng import next_below, next_double
 from .cells import neighbour_partner
 from .exclusion import _distance3
 from .moves import _commit, _exclusion_cost, _new_exclusion, _segment_change, _segment_exclusion_cost, _set_segment
-from .pressure import _swap_pressure_change, update_moments
+from .pressure import _swap_pressure_change, _update_moments
 from .schedule import _accept_with, _bounds_apply, _early_reject, weighted_total
 from .state import (
     ACCEPTED,
@@ -229,7 +229,7 @@ def _swap_nodes(model, state, a, b, temp):
     _set_segment(state, a, new_len_a, new_exc_a)
     _set_segment(state, b, new_len_b, new_exc_b)
     if model.pressure_on:
-        update_moments(model, state, pa)
-        update_moments(model, state, pb)
+        _update_moments(model, state, pa)
+        _update_moments(model, state, pb)
     _commit(model, state, d_vol, d_pow, d_exc, 0.0, d_pre)
     return ACCEPTED
