@@ -313,6 +313,7 @@ def test_5_a_deterministic_failure_is_not_retried_and_says_a_rerun_fails_the_sam
 # -- 6. grids: memory, coarseness, mask contents -------------------------------------------------
 
 
+@pytest.mark.slow  # 34 s: six grids built to be refused
 def test_6_grids_too_large_or_too_coarse_and_bad_masks_are_refused(tmp_path):
     with pytest.raises(
         TissueError,

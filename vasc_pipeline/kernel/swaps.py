@@ -55,7 +55,7 @@ def _path_delta(model, state, start, stop, dn):
 def _exchange_parents(state, a, b, lca):
     """Hang a where b hung and b where a hung; fix the downstream counts up to the LCA.
 
-    Applying it twice restores the tree, which is how a tentative swap is undone.
+    Applying it twice restores the tree.
     """
     pa = state.parent[a]
     pb = state.parent[b]
