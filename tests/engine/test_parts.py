@@ -26,14 +26,27 @@ from vasc_pipeline.model.tree import Tree, children_from_parent, count_terminals
 SPHERE = ["tissue=sphere", "n_terminals=400", "anneal.steps=2000000"]
 
 
-@pytest.fixture(scope="module")
-def annealed():
+# The terminal-pressure term on: a part's terminals see the whole tree's pressures.
+PRESSURE = ["physics.A_p=1e-5"]
+
+
+def _half_annealed(*overrides):
     """A sphere tree half-way through its anneal, its sums recomputed."""
-    problem = make_problem(*SPHERE)
+    problem = make_problem(*SPHERE, *overrides)
     state = engine.initial_state(problem, 0)
     engine.run_block(problem, state, 1_000_000)
     kernel.initialise(problem.model, state)
     return problem, state
+
+
+@pytest.fixture(scope="module")
+def annealed():
+    return _half_annealed()
+
+
+@pytest.fixture(scope="module")
+def annealed_with_pressure():
+    return _half_annealed(*PRESSURE)
 
 
 @pytest.mark.parametrize("radius", [0.0, 1.0, 2.5, 4.87, 6.0])
@@ -82,9 +95,10 @@ def test_the_cut_partitions_the_tree_into_balanced_parts(annealed, leaves):
         np.testing.assert_array_equal(p.nodes[: p.n_inlets], np.unique(state.parent[p.roots]))
 
 
+@pytest.mark.parametrize("tree", ["annealed", "annealed_with_pressure"])
 @pytest.mark.parametrize("leaves", [False, True], ids=["subtrees", "terminals"])
-def test_the_parts_changes_add_up_to_the_whole_trees_exactly(annealed, leaves):
-    problem, whole = annealed
+def test_the_parts_changes_add_up_to_the_whole_trees_exactly(tree, leaves, request):
+    problem, whole = request.getfixturevalue(tree)
     state = engine.restore_state(problem, engine.state_arrays(whole))
     before = state.costs + state.compensation
     position = state.position.copy()
@@ -101,6 +115,7 @@ def test_the_parts_changes_add_up_to_the_whole_trees_exactly(annealed, leaves):
     after = state.costs + state.compensation
     assert after[kernel.SUPPLY] == expected[kernel.SUPPLY]  # integer-valued: exact
     np.testing.assert_allclose(after, expected, rtol=1e-12)
+    assert (after[kernel.PRESSURE] != before[kernel.PRESSURE]) == problem.model.pressure_on
     assert_running_equals_full(problem, state)
     check_tree(engine.tree_of(problem, state), problem.tissue)
     # frozen: the top tree above the parts, and every terminal outside a part of terminals
@@ -111,8 +126,10 @@ def test_the_parts_changes_add_up_to_the_whole_trees_exactly(annealed, leaves):
     np.testing.assert_array_equal(state.position[still], position[still])
 
 
-def test_a_parts_run_does_not_depend_on_how_the_parts_are_run():
-    overrides = [*SPHERE, "anneal.parts=2", "anneal.part_phases=8", "anneal.steps=400000", "anneal.trace_every=50000"]
+@pytest.mark.parametrize("pressure", [[], PRESSURE], ids=["", "pressure"])
+def test_a_parts_run_does_not_depend_on_how_the_parts_are_run(pressure):
+    overrides = [*SPHERE, *pressure, "anneal.parts=2", "anneal.part_phases=8", "anneal.steps=400000"]
+    overrides.append("anneal.trace_every=50000")
     serial = engine.run(config.compose(overrides), seed=3)
     with ThreadPoolExecutor(2) as pool:
         threaded = engine.run(config.compose(overrides), seed=3, part_map=pool.map)
@@ -150,7 +167,6 @@ def test_a_killed_parts_run_resumes_to_the_same_tree(tmp_path):
     [
         (["anneal.parts=0"], r"anneal\.parts must be an integer in \[1, n_terminals / 16 = 25\]"),
         (["anneal.parts=26"], r"anneal\.parts must be an integer in \[1, n_terminals / 16 = 25\]"),
-        (["anneal.parts=2", "physics.A_p=1"], r"anneal\.parts=2 needs physics\.A_p = 0"),
         (["anneal.part_share=1"], r"anneal\.part_share must lie in \(0, 1\)"),
         (["anneal.part_phases=0"], r"anneal\.part_phases must be an integer in \[1, 100000\]"),
     ],

@@ -202,11 +202,6 @@ def _check_parts(cfg: RunConfig) -> None:
             f"anneal.parts must be an integer in [1, n_terminals / 16 = {max(1, cfg.n_terminals // 16)}] (parts of at "
             f"least 16 terminals), got {a.parts}"
         )
-    if a.parts > 1 and cfg.physics.A_p != 0:
-        raise ConfigError(
-            f"anneal.parts={a.parts} needs physics.A_p = 0: the terminal-pressure term couples every segment of "
-            "the tree, so parts could not be annealed apart"
-        )
 
 
 def _check_labels(labels: LabelsConfig) -> None:

@@ -340,7 +340,7 @@ RUN_KEYS: tuple[Key, ...] = (
             "K: the tree anneal in K parts annealed side by side ([One tree in "
             "parts](model.md#one-tree-in-parts-annealparts)); 1: the serial anneal"
         ),
-        accepted="integer in [1, N/16]; > 1 needs `physics.A_p = 0` and `method=anneal`",
+        accepted="integer in [1, N/16]; > 1 needs `method=anneal`",
     ),
     Key(
         "anneal.part_phases",

@@ -11,11 +11,11 @@ Two kinds of part (:func:`make_parts`), both cut from the tree by :func:`cut`:
   (:func:`part_regions`: every tissue voxel belongs to the group of its nearest terminal), so
   that no voxel's supply count changes in two parts.
 
-Every cost term but C_p is a sum over segments or over voxels that the parts change in
-disjoint pieces: their changes add up to the whole tree's, exactly (:func:`merge_parts`
-recomputes the whole tree's sums; C_p, the terminal pressures, couples every segment and must
-be off, ``physics.A_p = 0``). Within a part the moves are the kernel's own, so for every move
-a part allows, its decision is the whole tree's.
+Every cost term is a sum over segments, voxels or terminals that the parts change in disjoint
+pieces: their changes add up to the whole tree's, exactly (:func:`merge_parts` recomputes the
+whole tree's sums). For C_p, each pseudo-inlet keeps its pressure in the whole tree (no segment
+above a part changes), so a part's terminal pressures are the whole tree's. Within a part the
+moves are the kernel's own, so for every move a part allows, its decision is the whole tree's.
 
 Each part draws from its own generator, seeded from (phase seed, part index), so the result
 is a function of the tree, the phase seed and ``k``, not of how many workers ran the parts or
@@ -64,7 +64,8 @@ class Part:
     grid, 1 where its terminals may be; the box holds every voxel their supply spheres may
     reach (:data:`MARGIN_SLACK` beyond the supply radius), and the part's kernel sees the
     supply map and the tissue only there. None for a part of subtrees, whose terminals stay
-    put and which sees neither.
+    put and which sees neither. ``inlet_pressure``: float64 (n_inlets,) [Pa], each
+    pseudo-inlet's pressure in the whole tree.
     """
 
     nodes: np.ndarray
@@ -73,6 +74,7 @@ class Part:
     n_terminals: int
     mask: np.ndarray | None
     corner: np.ndarray | None = None
+    inlet_pressure: np.ndarray | None = None
 
     @property
     def box(self) -> tuple[slice, ...]:
@@ -197,6 +199,7 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
             lo = np.array([max(b.start - reach, 0) for b in box], dtype=np.int64)
             box = tuple(slice(a, min(b.stop + reach, n)) for a, b, n in zip(lo, box, region.shape))
             masks[p], corners[p] = (region[box] == p).astype(np.uint8), lo
+    kernel.pressure_cost(model, state)  # every node's pressure, into scratch_pressure
     out = []
     for p, part_roots in enumerate(roots):
         nodes = _subtree_nodes(state.children, part_roots)
@@ -210,19 +213,22 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
                 len(terminals),
                 masks[p],
                 corners[p],
+                state.scratch_pressure[inlets].copy(),
             )
         )
     return out
 
 
 def part_model(model: kernel.Model, part: Part) -> kernel.Model:
-    """The kernel model of a part: its node counts, counts kept between its pseudo-inlets'
-    trees, terminals moving only in parts of terminals, within their mask (the supply grid
-    then the part's box); the whole tree's tables, exclusion grid, weights and schedule."""
+    """The kernel model of a part: its node counts and pseudo-inlet pressures, counts kept
+    between its pseudo-inlets' trees, terminals moving only in parts of terminals, within their
+    mask (the supply grid then the part's box); the whole tree's tables, exclusion grid, weights
+    and schedule."""
     if part.mask is None:  # its terminals stay put: no tissue to look up
         return model._replace(
             n_inlets=part.n_inlets,
             n_terminals=part.n_terminals,
+            pressure_inlet=part.inlet_pressure,
             mask=_NO_GRID,
             fixed_inlet_counts=True,
             move_terminals=False,
@@ -232,6 +238,7 @@ def part_model(model: kernel.Model, part: Part) -> kernel.Model:
     return model._replace(
         n_inlets=part.n_inlets,
         n_terminals=part.n_terminals,
+        pressure_inlet=part.inlet_pressure,
         mask=part.mask,
         origin=model.origin + model.voxel_size * part.corner[::-1],
         bifurcation_region=np.zeros((0, 0, 0), dtype=np.uint8),  # its bifurcations are pseudo-inlets: fixed
@@ -281,7 +288,10 @@ def part_state(problem: Problem, model: kernel.Model, state: kernel.State, part:
         "cell_prev": np.full(m, -1, dtype=np.int64),
     }
     sub = restore_state(problem, arrays, n_terminals=max(part.n_terminals, 1))
-    kernel.initialise_segments(part_model(model, part), sub)
+    own_model = part_model(model, part)
+    kernel.initialise_segments(own_model, sub)
+    if own_model.pressure_on:  # the moments its ΔC_p reads (its C_p stays 0: the merge recomputes it)
+        kernel.pressure_moments(own_model, sub)
     sub.costs[kernel.SUPPLY] = state.costs[kernel.SUPPLY] + state.compensation[kernel.SUPPLY]
     return sub
 

@@ -231,7 +231,7 @@ def _kernel_model(cfg: RunConfig, tissue: Tissue, physics: Physics, terms, sched
         pressure_on=terms.pressure,
         move_terminals=not cfg.terminals.fixed,
         planar=tissue.ndim == 2,
-        pressure_inlet=p.pressure_inlet,
+        pressure_inlet=np.full(physics.n_inlets, float(p.pressure_inlet)),
         pressure_terminal=p.pressure_terminal,
         total_steps=float(schedule.total),
         pack_steps=float(schedule.pack),
@@ -446,6 +446,6 @@ def restore_state(problem: Problem, arrays: dict[str, np.ndarray], n_terminals: 
         scratch_shell_bands=np.zeros((n, kernel.SHELL_BANDS), dtype=np.int64),
         scratch_shell_frame=np.zeros((n, 4)),
     )
-    if problem.model.pressure_on:
+    if problem.model.pressure_on and n_terminals is None:  # a part's are its own model's (engine.parts)
         kernel.pressure_moments(problem.model, state)
     return state

@@ -36,9 +36,11 @@ def pressure_cost(model, state):
     stack = state.scratch_stack
     top = 0
     for k in range(model.n_inlets):
-        pressure[k] = model.pressure_inlet
-        stack[top] = children[k, 0]
-        top += 1
+        pressure[k] = model.pressure_inlet[k]
+        for s in range(2):  # a part's pseudo-inlet may hold two of its subtrees
+            if children[k, s] >= 0:
+                stack[top] = children[k, s]
+                top += 1
     total = 0.0
     first_bif = model.n_inlets + model.n_terminals
     while top > 0:
@@ -98,12 +100,12 @@ def _update_moments(model, state, x):
 
 @jit_norc_inline
 def _node_pressure(model, state, x):
-    """Pressure [Pa] at node x: the inlet's less the drops on the path up to it (O(depth))."""
+    """Pressure [Pa] at node x: its inlet's less the drops on the path up to it (O(depth))."""
     drops = 0.0
     while state.parent[x] >= 0:
         drops += _segment_drop(model, state, x)
         x = state.parent[x]
-    return model.pressure_inlet - drops
+    return model.pressure_inlet[x] - drops
 
 
 @jit_norc_inline
@@ -136,7 +138,7 @@ def _translation_pressure_change(model, state, i, len_i, c0, len_c0, c1, len_c1)
 @jit_norc_inline
 def _path_drops(model, state, start, stop, dn):
     """Drops on the path start .. stop (exclusive; up to the inlet when stop is -1) now, and
-    with n changed by dn on it."""
+    with n changed by dn on it, and the node where it ends (stop, or the inlet)."""
     old = 0.0
     new = 0.0
     x = start
@@ -144,7 +146,7 @@ def _path_drops(model, state, start, stop, dn):
         old += _segment_drop(model, state, x)
         new += _drop(model, state.n_downstream[x] + dn, state.seg_length[x])
         x = state.parent[x]
-    return old, new
+    return old, new, x
 
 
 @jit_norc_inline
@@ -178,13 +180,17 @@ def _swap_pressure_change(model, state, a, b, lca, new_len_a, new_len_b):
     pa = state.parent[a]
     pb = state.parent[b]
     dn = state.n_downstream[b] - state.n_downstream[a]
-    top = model.pressure_inlet if lca < 0 else _node_pressure(model, state, lca)  # -1: each path's inlet
-    old_a, new_a = _path_drops(model, state, pa, lca, dn)
-    old_b, new_b = _path_drops(model, state, pb, lca, -dn)
-    pressure_pa = top - old_a
-    pressure_pb = top - old_b
-    new_pressure_pa = top - new_a
-    new_pressure_pb = top - new_b
+    old_a, new_a, end_a = _path_drops(model, state, pa, lca, dn)
+    old_b, new_b, end_b = _path_drops(model, state, pb, lca, -dn)
+    if lca >= 0:
+        top_a = top_b = _node_pressure(model, state, lca)
+    else:  # each path's own inlet (a part's pseudo-inlets differ in pressure)
+        top_a = model.pressure_inlet[end_a]
+        top_b = model.pressure_inlet[end_b]
+    pressure_pa = top_a - old_a
+    pressure_pb = top_b - old_b
+    new_pressure_pa = top_a - new_a
+    new_pressure_pb = top_b - new_b
     change = _path_side_change(model, state, a, pa, lca, dn, pressure_pa, new_pressure_pa)
     change += _path_side_change(model, state, b, pb, lca, -dn, pressure_pb, new_pressure_pb)
     drop_a = _segment_drop(model, state, a)

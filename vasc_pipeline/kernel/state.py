@@ -75,7 +75,7 @@ Model = namedtuple(
         "pressure_on",
         "move_terminals",
         "planar",
-        "pressure_inlet",
+        "pressure_inlet",  # float64 (n_inlets,) Pa: each inlet's (a part's pseudo-inlets: their pressure in the tree)
         "pressure_terminal",  # Pa
         "total_steps",  # proposals of the run; the exponential schedule (ends in State.schedule) runs
         # from pack_steps to total_steps
