@@ -9,7 +9,14 @@ import pytest
 from vasc_pipeline.config import ConfigError, compose, from_stored
 from vasc_pipeline.config.identity import config_hash
 
-PHYSIOLOGICAL = {"physics.gamma": 7 / 3, "physics.r_cutoff": 2e-4, "tissue.bifurcation_reach": 0.0}
+PHYSIOLOGICAL = {
+    "physics.gamma": 7 / 3,
+    "physics.r_cutoff": 2e-4,
+    "physics.r_cutoff_ramp": 2e-4,
+    "physics.viscosity_law": "pries_in_vivo",
+    "physics.A_p": 1e-9,
+    "tissue.bifurcation_reach": 0.0,
+}
 
 
 def value(cfg, dotted):
@@ -20,6 +27,7 @@ def value(cfg, dotted):
 def test_the_paper_model_is_the_one_stores_were_grown_with():
     paper = compose(["model=paper"])
     assert (paper.physics.gamma, paper.physics.r_cutoff, paper.tissue.bifurcation_reach) == (2.1, 1e-5, None)
+    assert (paper.physics.r_cutoff_ramp, paper.physics.viscosity_law, paper.physics.A_p) == (0.0, "constant", 0.0)
     assert paper.tissue.inlet_share is None and paper.tissue.inlet_assignment == "random"
     stored_before = asdict(paper)
     del stored_before["model"]  # a store written before the model group existed
@@ -32,7 +40,7 @@ def test_the_physiological_model_sets_its_keys_on_every_tissue_and_each_stays_ov
     cfg = compose(["model=physiological", f"tissue={tissue}"])
     assert cfg.model.name == "physiological"
     for key, expected in PHYSIOLOGICAL.items():
-        assert value(cfg, key) == pytest.approx(expected), key
+        assert value(cfg, key) == (expected if isinstance(expected, str) else pytest.approx(expected)), key
     heart = tissue == "heart"  # the split between the two arteries is the heart's
     assert cfg.tissue.inlet_share == ([0.62, 0.38] if heart else None)
     assert cfg.tissue.inlet_share_tolerance == (0.15 if heart else None)

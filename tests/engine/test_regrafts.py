@@ -107,7 +107,7 @@ def test_the_start_temperature_is_raised_to_its_floor_and_only_raised():
     for floor, expected in ((10.0 * calibrated, 10.0 * calibrated), (0.1 * calibrated, calibrated)):
         raised = make_problem("tissue=heart", "n_terminals=60", f"anneal.T_start_min={floor}")
         assert engine.calibrate_schedule(raised, state) == (pytest.approx(expected, rel=1e-12), t_end)
-    assert make_problem(*PHYSIOLOGICAL_HEART).config.anneal.T_start_min == 16.0
+    assert make_problem(*PHYSIOLOGICAL_HEART).config.anneal.T_start_min == 100.0
 
 
 def test_a_tree_with_fewer_nodes_than_neighbours_is_searched_whole():

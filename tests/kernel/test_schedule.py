@@ -359,6 +359,8 @@ def _fixed_sites(tmp_path, n, seed):
 def test_fast_with_polish_reaches_the_exhaustive_global_optimum(tmp_path, n):
     path, sites = _fixed_sites(tmp_path, n, seed=n)
     overrides = [
+        "model=physiological",  # the default, for the search and the runs alike
+        "physics.A_p=0",  # the exhaustive search's cost is C_v + C_w
         "tissue=plane2d",
         f"n_terminals={n}",
         f"terminals.path={path}",

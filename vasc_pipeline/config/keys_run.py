@@ -65,6 +65,7 @@ RUN_KEYS: tuple[Key, ...] = (
             "at hematocrit 0.45 in glass tubes (`pries_in_vitro`) or in living microvessels (`pries_in_vivo`) "
             "([The costs](model.md#the-costs))"
         ),
+        default="`pries_in_vivo` (`model=physiological`); {} (`model=paper`)",
         accepted="{}",
         check=OneOf(viscosity_laws),
     ),
@@ -83,6 +84,7 @@ RUN_KEYS: tuple[Key, ...] = (
             "the exclusion term's weight rises linearly from 0 at r_cutoff to 1 at r_cutoff + r_cutoff_ramp; "
             "0: a step at r_cutoff ([The costs](model.md#the-costs))"
         ),
+        default="2e-4 (`model=physiological`); {} (`model=paper`)",
         accepted="{}",
         check=NON_NEGATIVE,
     ),
@@ -95,7 +97,14 @@ RUN_KEYS: tuple[Key, ...] = (
         accepted="{}",
         check=NON_NEGATIVE,
     ),
-    Key("physics.A_p", "1", "weight of the pressure term", default="{} (off)", accepted="{}", check=NON_NEGATIVE),
+    Key(
+        "physics.A_p",
+        "1",
+        "weight of the pressure term",
+        default="1e-9 (`model=physiological`); {} (`model=paper`: off)",
+        accepted="{}",
+        check=NON_NEGATIVE,
+    ),
     Key("physics.A_s", "1", "weight of the supply term", accepted="{}", check=NON_NEGATIVE),
     Key(
         "physics.pressure_inlet",
@@ -130,7 +139,7 @@ RUN_KEYS: tuple[Key, ...] = (
             "a calibrated start temperature is raised to this; null: not raised. The calibration "
             "reads the typical move, whose cost falls with N, while the trunks' barriers do not"
         ),
-        default="heart: 16 (`model=physiological`); else {}",
+        default="heart: 100 (`model=physiological`); else {}",
         accepted="{}",
         check=Range(0, lo_open=True, null=True),
     ),
