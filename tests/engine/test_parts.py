@@ -127,8 +127,14 @@ def test_the_parts_changes_add_up_to_the_whole_trees_exactly(tree, leaves, reque
 
 
 def test_a_parts_run_does_not_depend_on_how_the_parts_are_run():
-    overrides = [*SPHERE, *PRESSURE, "anneal.parts=2", "anneal.part_phases=8", "anneal.steps=400000"]
-    overrides.append("anneal.trace_every=50000")
+    overrides = [
+        *SPHERE,
+        *PRESSURE,
+        "anneal.parts=2",
+        "anneal.part_phases=8",
+        "anneal.steps=400000",
+        "anneal.trace_every=50000",
+    ]
     serial = engine.run(config.compose(overrides), seed=3)
     with ThreadPoolExecutor(2) as pool:
         threaded = engine.run(config.compose(overrides), seed=3, part_map=pool.map)

@@ -73,8 +73,8 @@ class Part:
     n_inlets: int
     n_terminals: int
     mask: np.ndarray | None
+    inlet_pressure: np.ndarray
     corner: np.ndarray | None = None
-    inlet_pressure: np.ndarray | None = None
 
     @property
     def box(self) -> tuple[slice, ...]:
@@ -212,8 +212,8 @@ def make_parts(problem: Problem, state: kernel.State, k: int, shift: np.ndarray,
                 len(inlets),
                 len(terminals),
                 masks[p],
-                corners[p],
-                state.scratch_pressure[inlets].copy(),
+                inlet_pressure=state.scratch_pressure[inlets].copy(),
+                corner=corners[p],
             )
         )
     return out
@@ -224,25 +224,25 @@ def part_model(model: kernel.Model, part: Part) -> kernel.Model:
     between its pseudo-inlets' trees, terminals moving only in parts of terminals, within their
     mask (the supply grid then the part's box); the whole tree's tables, exclusion grid, weights
     and schedule."""
+    own = dict(
+        n_inlets=part.n_inlets,
+        n_terminals=part.n_terminals,
+        pressure_inlet=part.inlet_pressure,
+        fixed_inlet_counts=True,
+    )
     if part.mask is None:  # its terminals stay put: no tissue to look up
         return model._replace(
-            n_inlets=part.n_inlets,
-            n_terminals=part.n_terminals,
-            pressure_inlet=part.inlet_pressure,
+            **own,
             mask=_NO_GRID,
-            fixed_inlet_counts=True,
             move_terminals=False,
             supply_target=_NO_TARGET,
         )
     target = model.supply_target
     return model._replace(
-        n_inlets=part.n_inlets,
-        n_terminals=part.n_terminals,
-        pressure_inlet=part.inlet_pressure,
+        **own,
         mask=part.mask,
         origin=model.origin + model.voxel_size * part.corner[::-1],
         bifurcation_region=np.zeros((0, 0, 0), dtype=np.uint8),  # its bifurcations are pseudo-inlets: fixed
-        fixed_inlet_counts=True,
         supply_target=np.ascontiguousarray(target[part.box]) if target.size else target,  # the box's, as the map
     )
 
