@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--dir", type=Path, default=Path("/tmp/svv_study"), help="grow_svv.py's --out")
     ap.add_argument("--rows", type=Path, help="rows file (default: rows.jsonl, with --cco rows_cco.jsonl, here)")
     ap.add_argument("--cco", action="store_true", help="score our CCO (grown here) instead of svv's trees")
-    ap.add_argument("--seed", type=int, default=0, help="our CCO's seed (with --cco)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="our CCO's seeds (with --cco)")
     ap.add_argument(
         "--quick",
         action="store_true",
@@ -256,7 +256,11 @@ def main(argv: list[str] | None = None) -> None:
         return
     rows = args.rows or Path(__file__).with_name("rows_cco.jsonl" if args.cco else "rows.jsonl")
     for n in args.n:
-        append(score_cco(n, args.seed) if args.cco else score(n, args.dir, f"N{n}{args.tag}"), rows)
+        if args.cco:
+            for seed in args.seeds:
+                append(score_cco(n, seed), rows)
+        else:
+            append(score(n, args.dir, f"N{n}{args.tag}"), rows)
 
 
 if __name__ == "__main__":
